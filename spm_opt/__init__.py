@@ -1,0 +1,48 @@
+"""spm_opt: plan, verify and execute trajectories for a spherical parallel manipulator
+for brain surgery.
+
+    import spm_opt as so
+    problem = so.load_problem("problems/craniotomy_bone_flap.toml")
+    trajectory = so.plan(problem, planner="cubic")
+    report = so.evaluate(problem, trajectory)
+"""
+
+import logging
+
+from spm_opt.contour import Contour
+from spm_opt.errors import (
+    InputError,
+    PlanningError,
+    SpmOptError,
+    UnknownPlannerError,
+    UnreachableError,
+)
+from spm_opt.evaluate import Report, Violation, evaluate
+from spm_opt.model.params import Robot, load_robot
+from spm_opt.planners import PLANNERS, plan
+from spm_opt.problem import Limits, Problem, load_problem
+from spm_opt.trajectory import Trajectory, package_version
+
+__version__ = package_version()
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())
+
+__all__ = [
+    "PLANNERS",
+    "Contour",
+    "InputError",
+    "Limits",
+    "PlanningError",
+    "Problem",
+    "Report",
+    "Robot",
+    "SpmOptError",
+    "Trajectory",
+    "UnknownPlannerError",
+    "UnreachableError",
+    "Violation",
+    "evaluate",
+    "load_problem",
+    "load_robot",
+    "plan",
+]

@@ -1,0 +1,109 @@
+"""The ``spm-opt`` command line, thin over the library.
+
+A user's mistake prints one line, ``spm-opt: error: ...``, and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NoReturn
+
+from spm_opt.errors import InputError, SpmOptError
+
+PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one line and status 2 like every other error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="spm-opt", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    reproduce = commands.add_parser("reproduce", help="reproduce the paper's Table III and Fig. 8")
+    reproduce.add_argument("--out", required=True, type=Path, help="output directory")
+    reproduce.add_argument(
+        "--problem",
+        default=PAPER_PROBLEM,
+        type=Path,
+        help=f"the paper's problem file (default: {PAPER_PROBLEM})",
+    )
+
+    plan = commands.add_parser("plan", help="plan a problem and write the trajectory CSV")
+    plan.add_argument("problem", type=Path, help="problem TOML file")
+    plan.add_argument("--planner", default="cubic", help="planner name (default: cubic)")
+    plan.add_argument("--out", required=True, type=Path, help="trajectory CSV to write")
+    plan.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="sampling rate of the CSV (default 100 Hz, breakpoints included)",
+    )
+
+    evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
+    evaluate.add_argument("problem", type=Path, help="problem TOML file")
+    evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
+    evaluate.add_argument("--json", action="store_true", help="print the report as JSON")
+    return parser
+
+
+def _reproduce(args: argparse.Namespace) -> None:
+    from spm_opt.reproduce import reproduce
+
+    for path in reproduce(args.problem, args.out):
+        print(path)
+
+
+def _plan(args: argparse.Namespace) -> None:
+    from spm_opt.planners import get_planner, plan
+    from spm_opt.problem import load_problem
+
+    if args.out.suffix != ".csv":
+        raise InputError(f"--out {args.out}: expected a file name ending in .csv")
+    if args.rate is not None and not 0.0 < args.rate <= 1e5:
+        raise InputError(f"--rate {args.rate}: expected a rate in Hz with 0 < rate <= 100000")
+    get_planner(args.planner)
+    problem = load_problem(args.problem)
+    trajectory = plan(problem, args.planner)
+    trajectory.to_csv(args.out, rate_hz=args.rate)
+    print(f"{args.out}: {args.planner} plan, {trajectory.duration:.3f} s")
+
+
+def _evaluate(args: argparse.Namespace) -> None:
+    from spm_opt.evaluate import evaluate
+    from spm_opt.problem import load_problem
+    from spm_opt.trajectory import Trajectory
+
+    problem = load_problem(args.problem)
+    report = evaluate(problem, Trajectory.from_csv(args.trajectory))
+    print(json.dumps(report.to_dict(), indent=2) if args.json else report.to_markdown(), end="")
+
+
+_COMMANDS = {"reproduce": _reproduce, "plan": _plan, "evaluate": _evaluate}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    args = _parser().parse_args(argv)
+    try:
+        _COMMANDS[args.command](args)
+    except SpmOptError as error:
+        print(f"spm-opt: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("spm-opt: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,169 @@
+"""The planned cut on the skull: great-circle arcs through the landmarks.
+
+A surgeon draws the cut through the landmarks A_i. Between consecutive landmarks it follows
+the great circle through their directions, and its radius (the skull's) changes linearly
+with the angle travelled, from |A_i| to |A_{i+1}|. The tool points at the isocenter, so the
+robot cuts where the platform's direction b = B / r_u meets the skull; the skull's radius
+in a direction is taken as that of the nearest contour point (by angle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(16)
+
+
+@dataclass(frozen=True)
+class Nearest:
+    """The contour point nearest (by angle) to each of N directions.
+
+    Attributes
+    ----------
+    arc : ndarray (N,), int
+        Index of the arc (arc i runs from landmark i to the next).
+    angle : ndarray (N,), rad
+        Angle φ along that arc from its start landmark.
+    offset : ndarray (N,), rad
+        Angle between the direction and the nearest contour point.
+    radius : ndarray (N,), m
+        Skull radius at the nearest contour point.
+    interior : ndarray (N,), bool
+        True where the nearest point lies strictly inside its arc (not at a landmark).
+    """
+
+    arc: np.ndarray
+    angle: np.ndarray
+    offset: np.ndarray
+    radius: np.ndarray
+    interior: np.ndarray
+
+
+class Contour:
+    """Great-circle arcs between consecutive landmarks, closed back to the first if asked.
+
+    Parameters
+    ----------
+    landmarks : ndarray, shape (n, 3), m
+        Points on the skull, in visiting order; each with z > 0, no two consecutive equal.
+    closed : bool
+        Whether the cut returns from the last landmark to the first.
+    """
+
+    def __init__(self, landmarks: np.ndarray, closed: bool) -> None:
+        landmarks = np.asarray(landmarks, dtype=float)
+        order = list(range(len(landmarks))) + ([0] if closed else [])
+        starts, ends = landmarks[order[:-1]], landmarks[order[1:]]
+        self.landmarks = landmarks
+        self.closed = closed
+        self.start_radius = np.linalg.norm(starts, axis=1)
+        self.end_radius = np.linalg.norm(ends, axis=1)
+        self.start = starts / self.start_radius[:, None]
+        end = ends / self.end_radius[:, None]
+        normal = np.cross(self.start, end)
+        sine = np.linalg.norm(normal, axis=1)
+        self.sweep = np.arctan2(sine, np.einsum("ij,ij->i", self.start, end))
+        """Angle of each arc, rad."""
+        self.normal = normal / sine[:, None]
+        self.inplane = np.cross(self.normal, self.start)
+        self.radius_slope = (self.end_radius - self.start_radius) / self.sweep
+        """dρ/dφ of each arc, m/rad."""
+        self.arc_lengths = self._length_to(np.arange(len(self.sweep)), self.sweep)
+        self.landmark_arc_lengths = np.concatenate([[0.0], np.cumsum(self.arc_lengths)])
+        """Arc length at each landmark visit (the first again at the end if closed), m."""
+
+    @property
+    def length(self) -> float:
+        """Total length of the cut, m."""
+        return float(self.landmark_arc_lengths[-1])
+
+    def _radius(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        return self.start_radius[arc] + self.radius_slope[arc] * angle
+
+    def _length_to(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """Arc length from the start of ``arc`` to ``angle``: ∫ sqrt(ρ² + ρ'²) dφ (Gauss)."""
+        arc, angle = np.broadcast_arrays(np.asarray(arc), np.asarray(angle, dtype=float))
+        psi = (angle[..., None] / 2) * (_GAUSS_NODES + 1)
+        integrand = np.hypot(self._radius(arc[..., None], psi), self.radius_slope[arc][..., None])
+        return (angle / 2) * (integrand @ _GAUSS_WEIGHTS)
+
+    def point_at(self, s: np.ndarray) -> np.ndarray:
+        """Contour points (N, 3), m, at arc lengths ``s`` (N,), m, from the first landmark."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        arc = np.clip(
+            np.searchsorted(self.landmark_arc_lengths, s, side="right") - 1, 0, len(self.sweep) - 1
+        )
+        local = s - self.landmark_arc_lengths[arc]
+        angle = local / np.hypot(self._radius(arc, 0.0), self.radius_slope[arc])
+        for _ in range(8):  # Newton on s(φ) = local; ds/dφ = sqrt(ρ² + ρ'²) > 0
+            rate = np.hypot(self._radius(arc, angle), self.radius_slope[arc])
+            angle = np.clip(
+                angle - (self._length_to(arc, angle) - local) / rate, 0, self.sweep[arc]
+            )
+        return self._unit(arc, angle) * self._radius(arc, angle)[..., None]
+
+    def _unit(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        return (
+            np.cos(angle)[..., None] * self.start[arc]
+            + np.sin(angle)[..., None] * self.inplane[arc]
+        )
+
+    def nearest(self, directions: np.ndarray) -> Nearest:
+        """The contour point nearest by angle to each unit direction (N, 3)."""
+        p = np.asarray(directions, dtype=float)
+        along = p @ self.start.T  # (N, arcs)
+        across = p @ self.inplane.T
+        angle = np.arctan2(across, along)
+        interior = (angle > 0.0) & (angle < self.sweep)
+        in_plane = np.hypot(along, across)
+        off_plane = np.abs(p @ self.normal.T)
+        offset = np.where(interior, np.arctan2(off_plane, in_plane), np.inf)
+        ends = np.stack([self.start, self._unit(np.arange(len(self.sweep)), self.sweep)])
+        to_ends = np.arccos(np.clip(np.einsum("nk,eak->ena", p, ends), -1.0, 1.0))
+        closest_end = np.argmin(to_ends, axis=0)  # 0: start, 1: end, per (N, arcs)
+        end_offset = np.min(to_ends, axis=0)
+        use_end = end_offset < offset
+        offset = np.where(use_end, end_offset, offset)
+        angle = np.where(use_end, np.where(closest_end == 0, 0.0, self.sweep), angle)
+        arc = np.argmin(offset, axis=1)
+        rows = np.arange(len(p))
+        chosen_angle = angle[rows, arc]
+        return Nearest(
+            arc=arc,
+            angle=chosen_angle,
+            offset=offset[rows, arc],
+            radius=self._radius(arc, chosen_angle),
+            interior=~use_end[rows, arc],
+        )
+
+    def cut_points(self, directions: np.ndarray) -> np.ndarray:
+        """Where the tool meets the skull along unit directions (N, 3): points (N, 3), m."""
+        return self.nearest(directions).radius[:, None] * np.asarray(directions, dtype=float)
+
+    def deviation(self, directions: np.ndarray) -> np.ndarray:
+        """Distance (N,), m, of the cut point in each direction from the contour.
+
+        The chord 2 ρ sin(δ/2) between the cut point and the nearest contour point, with δ
+        the angle between them and ρ the skull radius there.
+        """
+        near = self.nearest(directions)
+        return 2.0 * near.radius * np.sin(near.offset / 2.0)
+
+    def tool_speed(self, directions: np.ndarray, direction_rates: np.ndarray) -> np.ndarray:
+        """Speed (N,), m/s, of the cut point for unit directions p (N, 3) moving at ṗ (N, 3).
+
+        The cut point is P = ρ p, so |Ṗ|² = ρ² |ṗ|² + ρ̇², with ρ̇ = ρ' φ̇ where the nearest
+        contour point moves along an arc (and 0 where it sits at a landmark).
+        """
+        p = np.asarray(directions, dtype=float)
+        p_dot = np.asarray(direction_rates, dtype=float)
+        near = self.nearest(p)
+        a, w = self.start[near.arc], self.inplane[near.arc]
+        pa, pw = np.einsum("nk,nk->n", p, a), np.einsum("nk,nk->n", p, w)
+        angle_rate = (
+            np.einsum("nk,nk->n", p_dot, w) * pa - pw * np.einsum("nk,nk->n", p_dot, a)
+        ) / (pa**2 + pw**2)
+        radius_rate = np.where(near.interior, self.radius_slope[near.arc] * angle_rate, 0.0)
+        return np.hypot(near.radius * np.linalg.norm(p_dot, axis=1), radius_rate)

@@ -1,0 +1,128 @@
+"""The figures, drawn with matplotlib's object interface (no pyplot, no global state)."""
+
+from __future__ import annotations
+
+import io
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from spm_opt.model.params import DEG, MM
+from spm_opt.problem import Problem
+from spm_opt.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+_JOINT_COLOURS = ("tab:blue", "tab:orange")
+
+
+def to_png(figure: Figure, dpi: int = 150) -> bytes:
+    """The figure as PNG bytes."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    return buffer.getvalue()
+
+
+def joints_figure(trajectory: Trajectory, title: str, rate_hz: float = 200.0) -> Figure:
+    """Joint angles (deg) and joint rates (deg/s) over time, as the paper's Fig. 8a."""
+    from matplotlib.figure import Figure
+
+    t = trajectory.time_grid(rate_hz)
+    q, qd = trajectory.position(t) / DEG, trajectory.velocity(t) / DEG
+    figure = Figure(figsize=(8, 6), layout="constrained")
+    angles, rates = figure.subplots(2, 1, sharex=True)
+    for joint, colour in enumerate(_JOINT_COLOURS):
+        label = f"θ{joint + 1}"
+        angles.plot(t, q[:, joint], color=colour, label=label)
+        rates.plot(t, qd[:, joint], color=colour, label=f"dθ{joint + 1}/dt")
+    landmark_times = trajectory.landmark_times
+    for axis in (angles, rates):
+        if landmark_times is not None:
+            for time in landmark_times:
+                axis.axvline(time, color="0.8", linewidth=0.8, zorder=0)
+        axis.grid(True, alpha=0.3)
+        axis.legend(loc="best")
+    angles.set_ylabel("joint angle (deg)")
+    rates.set_ylabel("joint rate (deg/s)")
+    rates.set_xlabel("time (s)")
+    angles.set_title(title)
+    return figure
+
+
+def path_figure(problem: Problem, trajectory: Trajectory, rate_hz: float = 50.0) -> Figure:
+    """The platform path and its cut on the skull in 3-D, as the paper's Fig. 8b.
+
+    Draws the skull (a sphere of the landmarks' mean radius), the planned contour, the cut,
+    the platform path B(t) on its sphere, the landmarks A_i and their projections B_i.
+    """
+    from matplotlib.figure import Figure
+
+    t = trajectory.time_grid(rate_hz)
+    r_u = problem.robot.upper_platform_radius
+    platform = trajectory.platform_points(t, r_u) / MM
+    cut = trajectory.cut_points(problem.contour, t) / MM
+    contour = problem.contour.point_at(np.linspace(0.0, problem.contour.length, 400)) / MM
+    landmarks, projected = problem.landmarks / MM, problem.platform_points / MM
+
+    figure = Figure(figsize=(15, 7), layout="constrained")
+    axis = figure.add_subplot(1, 2, 1, projection="3d")
+    skull_radius = float(np.mean(np.linalg.norm(landmarks, axis=1)))
+    azimuth, polar = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi / 2, 13))
+    axis.plot_wireframe(
+        skull_radius * np.cos(azimuth) * np.sin(polar),
+        skull_radius * np.sin(azimuth) * np.sin(polar),
+        skull_radius * np.cos(polar),
+        color="0.75",
+        linewidth=0.4,
+        label=f"skull (sphere, r = {skull_radius:.1f} mm)",
+    )
+    axis.plot(*platform.T, color="tab:blue", label=f"platform path B(t), r_u = {r_u / MM:g} mm")
+    axis.plot(*contour.T, color="tab:green", linestyle="--", linewidth=2, label="planned contour")
+    axis.plot(*cut.T, color="tab:red", label="cut on the skull")
+    for index, (name, a, b) in enumerate(
+        zip(problem.landmark_names, landmarks, projected, strict=True)
+    ):
+        axis.plot(*np.stack([[0, 0, 0], b]).T, color="0.5", linewidth=0.6, linestyle=":")
+        axis.text(*a, f" {name}", fontsize=9)
+        axis.text(*b, f" B{index + 1}", fontsize=9)
+    axis.scatter(*landmarks.T, color="black", s=18, label="landmarks A_i", depthshade=False)
+    axis.scatter(
+        *projected.T, color="tab:blue", s=18, marker="s", label="projections B_i", depthshade=False
+    )
+    axis.scatter([0], [0], [0], color="black", marker="+", s=60, label="isocenter")
+    axis.set_xlabel("x (mm)")
+    axis.set_ylabel("y (mm)")
+    axis.set_zlabel("z (mm)")
+    axis.set_box_aspect((1, 1, 0.6))
+    axis.view_init(elev=35, azim=-120)
+    axis.set_title(
+        f"{problem.name}: platform path and its cut on the skull "
+        f"({trajectory.metadata.get('planner', 'plan')})"
+    )
+    axis.legend(loc="upper left", fontsize=8)
+    _top_view(figure.add_subplot(1, 2, 2), problem, contour, cut)
+    return figure
+
+
+def _top_view(axis, problem: Problem, contour: np.ndarray, cut: np.ndarray) -> None:  # noqa: ANN001
+    """The cut and the planned contour seen from above (x-y, mm), with the landmarks."""
+    landmarks = problem.landmarks / MM
+    axis.plot(
+        contour[:, 0],
+        contour[:, 1],
+        color="tab:green",
+        linestyle="--",
+        linewidth=2,
+        label="planned contour",
+    )
+    axis.plot(cut[:, 0], cut[:, 1], color="tab:red", label="cut on the skull")
+    axis.scatter(landmarks[:, 0], landmarks[:, 1], color="black", s=20, zorder=3)
+    for name, (x, y, _) in zip(problem.landmark_names, landmarks, strict=True):
+        axis.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5))
+    axis.set_aspect("equal")
+    axis.grid(True, alpha=0.3)
+    axis.set_xlabel("x (mm)")
+    axis.set_ylabel("y (mm)")
+    axis.set_title("seen from above")
+    axis.legend(loc="best", fontsize=8)

@@ -1,0 +1,227 @@
+"""A planning problem: the robot, the landmarks to cut through, timing and limits.
+
+Problems live in TOML files (``problems/*.toml``) with the unit in every key; they are
+converted to SI once, here. A :class:`Problem` checks itself when built, from a file or from
+code, so that every planner receives a problem the robot can carry out.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spm_opt.contour import Contour
+from spm_opt.errors import InputError, UnreachableError
+from spm_opt.fields import Table, read_toml
+from spm_opt.model import kinematics
+from spm_opt.model.actuator import RPM
+from spm_opt.model.params import MM, Robot, load_robot
+
+_SAME_DIRECTION_RAD = 1e-6
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Limits every plan must respect (SI). ``None`` means not limited.
+
+    Attributes
+    ----------
+    max_joint_speed : float, rad/s
+    max_joint_acceleration : float or None, rad/s²
+    max_joint_jerk : float or None, rad/s³
+    max_tool_speed : float or None, m/s
+        Speed of the cut point along the skull.
+    contour_tolerance : float or None, m
+        Largest allowed distance of the cut point from the planned contour.
+    """
+
+    max_joint_speed: float
+    max_joint_acceleration: float | None = None
+    max_joint_jerk: float | None = None
+    max_tool_speed: float | None = None
+    contour_tolerance: float | None = None
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A cut through landmarks on the skull, for one robot, within limits.
+
+    Attributes
+    ----------
+    name : str
+    robot : Robot
+    landmark_names : tuple of str
+    landmarks : ndarray, shape (n, 3), m
+        Points on the skull (A_i), in visiting order.
+    closed : bool
+        Whether the cut returns to the first landmark.
+    segment_durations : ndarray, shape (segments,), s
+        Time from each landmark to the next (used by fixed-time planners).
+    limits : Limits
+    planner_options : dict
+        The problem file's ``[planner.NAME]`` tables, read by each planner.
+    source : Path or None
+        The problem file, when loaded from one; ``source_sha256`` is its hash.
+    """
+
+    name: str
+    robot: Robot
+    landmark_names: tuple[str, ...]
+    landmarks: np.ndarray
+    closed: bool
+    segment_durations: np.ndarray
+    limits: Limits
+    description: str = ""
+    planner_options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    source: Path | None = None
+    source_sha256: str | None = None
+
+    def __post_init__(self) -> None:
+        landmarks = np.asarray(self.landmarks, dtype=float)
+        object.__setattr__(self, "landmarks", landmarks)
+        object.__setattr__(self, "segment_durations", np.asarray(self.segment_durations, float))
+        names = self.landmark_names
+        if landmarks.ndim != 2 or landmarks.shape[1] != 3 or len(landmarks) < 2:
+            raise InputError(
+                f"landmarks: expected at least 2 points of 3 coordinates, got {landmarks.shape}"
+            )
+        if len(names) != len(landmarks) or len(set(names)) != len(names):
+            raise InputError(f"landmark names {list(names)}: expected one unique name per landmark")
+        for name, point in zip(names, landmarks, strict=True):
+            if not np.all(np.isfinite(point)):
+                raise InputError(f"landmark {name}: position {point / MM} mm must be finite")
+            if point[2] <= 0.0:
+                raise UnreachableError(
+                    f"landmark {name}: z = {point[2] / MM:g} mm lies at or below the isocenter "
+                    "plane; the robot reaches only z > 0"
+                )
+        visits = self.visit_order
+        for first, second in zip(visits[:-1], visits[1:], strict=True):
+            a, b = landmarks[first], landmarks[second]
+            angle = math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b))
+            if angle < _SAME_DIRECTION_RAD:
+                hint = (
+                    " (closed = true returns to the first landmark by itself)"
+                    if self.closed
+                    else ""
+                )
+                raise InputError(
+                    f"landmarks {names[first]} and {names[second]}: consecutive landmarks lie in "
+                    f"the same direction from the isocenter; remove one{hint}"
+                )
+        durations = self.segment_durations
+        if durations.shape != (len(visits) - 1,):
+            raise InputError(
+                f"segment_durations_s = {durations.tolist()}: expected {len(visits) - 1} "
+                f"durations, one per segment of the {'closed' if self.closed else 'open'} cut "
+                f"through {len(names)} landmarks"
+            )
+        if not np.all(np.isfinite(durations)) or np.any(durations <= 0.0):
+            raise InputError(
+                f"segment_durations_s = {durations.tolist()}: expected finite durations > 0 s"
+            )
+        self.robot.check_reachable(self.platform_points, list(names))
+
+    @property
+    def visit_order(self) -> list[int]:
+        """Landmark indices in the order the cut visits them (the first again if closed)."""
+        return list(range(len(self.landmarks))) + ([0] if self.closed else [])
+
+    @property
+    def visit_names(self) -> list[str]:
+        return [self.landmark_names[i] for i in self.visit_order]
+
+    @cached_property
+    def platform_points(self) -> np.ndarray:
+        """Eq. 1: the landmarks projected onto the platform sphere, B_i (n, 3), m."""
+        return kinematics.project_landmarks(self.landmarks, self.robot.upper_platform_radius)
+
+    @cached_property
+    def landmark_angles(self) -> np.ndarray:
+        """Eq. 2: joint angles (n, 2), rad, that put the platform at each B_i."""
+        return kinematics.inverse_kinematics(self.platform_points)
+
+    @property
+    def waypoint_angles(self) -> np.ndarray:
+        """Joint angles (segments + 1, 2), rad, of every landmark visit in order."""
+        return self.landmark_angles[self.visit_order]
+
+    @property
+    def waypoint_times(self) -> np.ndarray:
+        """Times (segments + 1,), s, of the landmark visits under ``segment_durations``."""
+        return np.concatenate([[0.0], np.cumsum(self.segment_durations)])
+
+    @cached_property
+    def contour(self) -> Contour:
+        """The planned cut through the landmarks."""
+        return Contour(self.landmarks, self.closed)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read and validate a problem file; its ``robot`` path is relative to the file."""
+    path = Path(path)
+    data = read_toml(path)
+    root = Table(data, str(path))
+    name = root.string("name")
+    description = root.string("description", default="")
+    robot_key = root.string("robot")
+    robot_path = path.parent / robot_key
+    if not robot_path.is_file():
+        raise root.error("robot", robot_key, f"no robot file at {robot_path}")
+    robot = load_robot(robot_path)
+    closed = root.boolean("closed", default=False)
+    durations = root.vector("segment_durations_s", minimum=0.0, exclusive_minimum=True)
+    names, points = [], []
+    for landmark in root.tables("landmarks"):
+        names.append(landmark.string("name"))
+        points.append(landmark.vector("position_mm", length=3) * MM)
+        landmark.finish()
+    limits_table = root.table("limits", required=False)
+    limits = _limits(limits_table, robot)
+    planners = root.table("planner", required=False)
+    options = {key: planners.raw(key) for key in planners.keys()}
+    for key, value in options.items():
+        if not isinstance(value, dict):
+            raise planners.error(key, value, f"expected a table [planner.{key}]")
+    limits_table.finish()
+    root.finish()
+    return Problem(
+        name=name,
+        description=description,
+        robot=robot,
+        landmark_names=tuple(names),
+        landmarks=np.array(points),
+        closed=closed,
+        segment_durations=durations,
+        limits=limits,
+        planner_options=options,
+        source=path,
+        source_sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+    )
+
+
+def _limits(table: Table, robot: Robot) -> Limits:
+    positive = {"minimum": 0.0, "exclusive_minimum": True, "default": None}
+    speed_rpm = table.number("max_joint_speed_rpm", **positive)
+    actuator_speed = robot.actuator.continuous_speed_rad_s
+    if speed_rpm is not None and speed_rpm * RPM > actuator_speed * (1 + 1e-9):
+        raise table.error(
+            "max_joint_speed_rpm",
+            speed_rpm,
+            f"expected at most the actuator's continuous speed, {actuator_speed / RPM:g} rpm",
+        )
+    tool_speed = table.number("max_tool_speed_mm_s", **positive)
+    tolerance = table.number("contour_tolerance_mm", minimum=0.0, default=None)
+    return Limits(
+        max_joint_speed=actuator_speed if speed_rpm is None else speed_rpm * RPM,
+        max_joint_acceleration=table.number("max_joint_acceleration_rad_s2", **positive),
+        max_joint_jerk=table.number("max_joint_jerk_rad_s3", **positive),
+        max_tool_speed=None if tool_speed is None else tool_speed * MM,
+        contour_tolerance=None if tolerance is None else tolerance * MM,
+    )

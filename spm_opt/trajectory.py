@@ -1,0 +1,263 @@
+"""The one trajectory type: joint positions of both actuators as a function of time.
+
+Every planner returns a :class:`Trajectory`; the evaluator, the plots and the executor take
+nothing else. Inside it is a piecewise polynomial q(t) (2 joints, rad, t in s), evaluated
+exactly at any time together with its derivatives. A planner that produces polynomials
+hands them over as they are; sampled data (a CSV file) become quintic Hermite pieces that
+match position, velocity and acceleration at every sample.
+
+On disk: a CSV with columns ``t,q1,q2,qd1,qd2,qdd1,qdd2`` (SI) and a JSON sidecar of the
+same name holding the metadata (planner, problem file and its hash, planner statistics,
+package version, breakpoints).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from importlib import metadata as package_metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import BPoly, PPoly
+
+from spm_opt.contour import Contour
+from spm_opt.errors import InputError
+from spm_opt.files import write_atomically
+from spm_opt.model import kinematics
+
+COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "qdd1", "qdd2")
+DEFAULT_RATE_HZ = 100.0
+_SAME_TIME_S = 1e-9
+
+
+def package_version() -> str:
+    try:
+        return package_metadata.version("spm_opt")
+    except package_metadata.PackageNotFoundError:
+        return "unknown"
+
+
+class Trajectory:
+    """Joint positions q(t) of both actuators, shape (2,) per time, rad.
+
+    Parameters
+    ----------
+    positions : scipy.interpolate.PPoly or BPoly
+        Piecewise polynomial of q(t) with 2 outputs, differentiable at least three times
+        inside each piece.
+    metadata : dict, optional
+        Planner name, statistics, ``landmark_times_s`` and anything else a planner records.
+    samples : tuple of ndarray, optional
+        (t, q, qd, qdd) this trajectory was built from, kept so that writing it back
+        reproduces them exactly.
+    """
+
+    def __init__(
+        self,
+        positions: PPoly | BPoly,
+        metadata: dict[str, Any] | None = None,
+        samples: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        self._q = positions
+        self._derivatives = [positions.derivative(n) for n in (1, 2, 3)]
+        self.metadata: dict[str, Any] = dict(metadata or {})
+        self._samples = samples
+
+    @classmethod
+    def from_samples(
+        cls,
+        t: np.ndarray,
+        q: np.ndarray,
+        qd: np.ndarray,
+        qdd: np.ndarray,
+        metadata: dict[str, Any] | None = None,
+    ) -> Trajectory:
+        """Quintic Hermite pieces through samples: t (N,), s; q, qd, qdd (N, 2), SI."""
+        t, q, qd, qdd = (np.asarray(a, dtype=float) for a in (t, q, qd, qdd))
+        derivatives = np.stack([q, qd, qdd], axis=1)  # (N, 3, 2)
+        positions = BPoly.from_derivatives(t, derivatives)
+        return cls(positions, metadata, samples=(t, q, qd, qdd))
+
+    @property
+    def start_time(self) -> float:
+        return float(self._q.x[0])
+
+    @property
+    def end_time(self) -> float:
+        return float(self._q.x[-1])
+
+    @property
+    def duration(self) -> float:
+        """Length of the trajectory, s."""
+        return self.end_time - self.start_time
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """Times (M,), s, where the polynomial pieces meet."""
+        return np.asarray(self._q.x, dtype=float)
+
+    def local_coefficients(self) -> np.ndarray:
+        """Coefficients (degree + 1, pieces, 2) of each piece in the time since it began,
+        highest power first (scipy's PPoly layout)."""
+        poly = self._q if isinstance(self._q, PPoly) else PPoly.from_bernstein_basis(self._q)
+        return np.asarray(poly.c)
+
+    @property
+    def landmark_times(self) -> np.ndarray | None:
+        """Times, s, at which the planner says each landmark visit happens, if it says."""
+        times = self.metadata.get("landmark_times_s")
+        return None if times is None else np.asarray(times, dtype=float)
+
+    def _clip(self, t: np.ndarray | float) -> np.ndarray:
+        return np.clip(np.asarray(t, dtype=float), self.start_time, self.end_time)
+
+    def position(self, t: np.ndarray | float) -> np.ndarray:
+        """q(t), shape (N, 2), rad. Times outside the trajectory take its end values."""
+        return np.asarray(self._q(self._clip(t)))
+
+    def velocity(self, t: np.ndarray | float) -> np.ndarray:
+        """q̇(t), shape (N, 2), rad/s."""
+        return self._derivative(0, t)
+
+    def acceleration(self, t: np.ndarray | float) -> np.ndarray:
+        """q̈(t), shape (N, 2), rad/s²."""
+        return self._derivative(1, t)
+
+    def jerk(self, t: np.ndarray | float) -> np.ndarray:
+        """Third derivative of q(t), shape (N, 2), rad/s³ (one-sided at breakpoints)."""
+        return self._derivative(2, t)
+
+    def _derivative(self, index: int, t: np.ndarray | float) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        values = np.asarray(self._derivatives[index](self._clip(t)))
+        outside = (t < self.start_time) | (t > self.end_time)
+        return np.where(outside[..., None], 0.0, values) if np.any(outside) else values
+
+    def time_grid(self, rate_hz: float = DEFAULT_RATE_HZ) -> np.ndarray:
+        """Sample times at ``rate_hz`` from the start, with every breakpoint and the end."""
+        breaks = self.breakpoints
+        uniform = self.start_time + np.arange(0.0, self.duration, 1.0 / rate_hz)
+        right = np.clip(np.searchsorted(breaks, uniform), 1, len(breaks) - 1)
+        gap = np.minimum(np.abs(uniform - breaks[right - 1]), np.abs(breaks[right] - uniform))
+        return np.union1d(uniform[gap > _SAME_TIME_S], breaks)
+
+    def samples(self, rate_hz: float | None = None) -> tuple[np.ndarray, ...]:
+        """(t, q, qd, qdd): the samples it was built from, or a grid at ``rate_hz``."""
+        if rate_hz is None and self._samples is not None:
+            return self._samples
+        t = self.time_grid(rate_hz or DEFAULT_RATE_HZ)
+        return t, self.position(t), self.velocity(t), self.acceleration(t)
+
+    def resample(self, rate_hz: float) -> Trajectory:
+        """A sampled copy at ``rate_hz`` (breakpoints kept), as a CSV file would hold it."""
+        return Trajectory.from_samples(*self.samples(rate_hz), metadata=self.metadata)
+
+    def platform_points(self, t: np.ndarray, r_u: float) -> np.ndarray:
+        """Upper platform mass centre B(t), shape (N, 3), m."""
+        return kinematics.forward_kinematics(self.position(t), r_u)
+
+    def cut_points(self, contour: Contour, t: np.ndarray) -> np.ndarray:
+        """Where the tool meets the skull at times t: (N, 3), m."""
+        return contour.cut_points(kinematics.forward_kinematics(self.position(t), 1.0))
+
+    def tool_speed(self, contour: Contour, t: np.ndarray) -> np.ndarray:
+        """Speed of the cut point across the skull at times t: (N,), m/s."""
+        q, qd = self.position(t), self.velocity(t)
+        directions = kinematics.forward_kinematics(q, 1.0)
+        rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
+        return contour.tool_speed(directions, rates)
+
+    # --- files --------------------------------------------------------------------
+
+    def to_csv(self, path: str | Path, rate_hz: float | None = None) -> None:
+        """Write FILE.csv and its FILE.json sidecar, both or neither (see :meth:`csv_files`)."""
+        write_atomically(self.csv_files(Path(path), rate_hz))
+
+    def csv_files(self, path: Path, rate_hz: float | None = None) -> dict[Path, str]:
+        """The text of FILE.csv and its FILE.json sidecar, by path, without writing them.
+
+        The samples are the ones it was built from, or a grid at ``rate_hz`` (default
+        100 Hz) that includes every breakpoint, so reading the file back gives the same
+        polynomial pieces for a trajectory of cubic or quintic pieces.
+        """
+        t, q, qd, qdd = self.samples(rate_hz)
+        table = np.column_stack([t, q[:, 0], q[:, 1], qd[:, 0], qd[:, 1], qdd[:, 0], qdd[:, 1]])
+        lines = [",".join(COLUMNS)] + [",".join(repr(v) for v in row) for row in table.tolist()]
+        sidecar = {
+            **self.metadata,
+            "columns": {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2"},
+            "breakpoints_s": self.breakpoints.tolist(),
+            "spm_opt_version": self.metadata.get("spm_opt_version", package_version()),
+        }
+        return {
+            path: "\n".join(lines) + "\n",
+            sidecar_path(path): json.dumps(sidecar, indent=2, default=_jsonable) + "\n",
+        }
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> Trajectory:
+        """Read a trajectory CSV (and its JSON sidecar, when there is one)."""
+        path = Path(path)
+        t, q, qd, qdd = _read_samples(path)
+        metadata: dict[str, Any] = {}
+        sidecar = sidecar_path(path)
+        if sidecar.is_file():
+            try:
+                metadata = json.loads(sidecar.read_text(encoding="utf-8"))
+            except (json.JSONDecodeError, UnicodeDecodeError) as error:
+                raise InputError(f"{sidecar}: not valid JSON: {error}") from None
+            if not isinstance(metadata, dict):
+                raise InputError(f"{sidecar}: expected a JSON object")
+        return cls.from_samples(t, q, qd, qdd, metadata)
+
+
+def sidecar_path(path: Path) -> Path:
+    """The JSON metadata file beside a trajectory CSV."""
+    return path.with_suffix(".json")
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+def _read_samples(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            rows = list(csv.reader(handle))
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputError(f"{path}: cannot be read ({error})") from None
+    if not rows or tuple(c.strip() for c in rows[0]) != COLUMNS:
+        found = ",".join(rows[0]) if rows else "an empty file"
+        raise InputError(f"{path}: header is {found!r}; expected {','.join(COLUMNS)}")
+    values = np.empty((len(rows) - 1, len(COLUMNS)))
+    for number, row in enumerate(rows[1:], start=2):
+        if len(row) != len(COLUMNS):
+            raise InputError(
+                f"{path}: line {number} has {len(row)} values; expected {len(COLUMNS)}"
+            )
+        for column, text in enumerate(row):
+            try:
+                value = float(text)
+            except ValueError:
+                value = float("nan")
+            if not np.isfinite(value):
+                where = f"{path}: line {number}, column {COLUMNS[column]} = {text!r}"
+                raise InputError(f"{where}: expected a finite number")
+            values[number - 2, column] = value
+    if len(values) < 2:
+        raise InputError(f"{path}: {len(values)} samples; expected at least 2")
+    steps = np.diff(values[:, 0])
+    if np.any(steps <= 0.0):
+        line = int(np.argmax(steps <= 0.0)) + 3
+        raise InputError(f"{path}: line {line}, column t: times must increase strictly")
+    return values[:, 0], values[:, 1:3], values[:, 3:5], values[:, 5:7]

@@ -1,0 +1,133 @@
+"""The evaluator on known answers, and its limit checks."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import spm_opt as so
+from spm_opt.model import kinematics
+from spm_opt.model.params import MM
+
+REQUIRED_KEYS = {
+    "duration_s",
+    "peak_joint_speed_rad_s",
+    "max_contour_deviation_mm",
+    "rms_contour_deviation_mm",
+    "max_tool_speed_mm_s",
+    "mean_tool_speed_mm_s",
+    "max_landmark_error_mm",
+    "violations",
+}
+
+
+def meridian_problem(paper_problem, angle=0.4):
+    """Two landmarks on the y-z great circle at the same skull radius."""
+    radius = 0.07
+    landmarks = radius * np.array([[0.0, 0.0, 1.0], [0.0, -np.sin(angle), np.cos(angle)]])
+    return dataclasses.replace(
+        paper_problem,
+        landmark_names=("P", "Q"),
+        landmarks=landmarks,
+        closed=False,
+        segment_durations=np.array([10.0]),
+    )
+
+
+def test_hand_made_path_with_a_known_distance(paper_problem):
+    """θ2 held at δ while θ1 sweeps along the arc: the cut is off the y-z great circle by
+    asin(b_x) with b_x = C1 S2 / sqrt(C2² + C1² S2²) (Eq. 5), a chord of 2ρ sin(·/2)."""
+    angle, delta = 0.4, 0.02
+    problem = meridian_problem(paper_problem, angle)
+    t = np.linspace(0.0, 10.0, 201)
+    theta1 = angle * t / 10.0
+    q = np.column_stack([theta1, np.full_like(t, delta)])
+    qd = np.column_stack([np.full_like(t, angle / 10.0), np.zeros_like(t)])
+    trajectory = so.Trajectory.from_samples(t, q, qd, np.zeros_like(q))
+    report = so.evaluate(problem, trajectory)
+    c1, s2, c2 = np.cos(theta1), np.sin(delta), np.cos(delta)
+    off = np.arcsin(c1 * s2 / np.sqrt(c2**2 + c1**2 * s2**2))
+    expected = 2 * 0.07 * np.sin(off / 2) / MM
+    assert report.max_contour_deviation_mm == pytest.approx(expected.max(), rel=1e-6)
+    assert report.max_contour_deviation_mm == pytest.approx(0.07 * delta / MM, rel=1e-3)
+
+
+def test_path_on_the_contour_has_no_deviation_and_even_speed(paper_problem):
+    problem = meridian_problem(paper_problem)
+    t = np.linspace(0.0, 10.0, 101)
+    q = np.column_stack([0.4 * t / 10.0, np.zeros_like(t)])
+    qd = np.column_stack([np.full_like(t, 0.04), np.zeros_like(t)])
+    report = so.evaluate(problem, so.Trajectory.from_samples(t, q, qd, np.zeros_like(q)))
+    assert report.max_contour_deviation_mm < 1e-9
+    assert report.max_tool_speed_mm_s == pytest.approx(0.07 * 0.04 / MM, rel=1e-9)
+    assert report.tool_speed_cv < 1e-9
+    assert report.max_landmark_error_mm < 1e-9
+    assert report.contour_length_mm == pytest.approx(0.07 * 0.4 / MM)
+
+
+def test_baseline_report(paper_problem, baseline):
+    report = so.evaluate(paper_problem, baseline)
+    data = report.to_dict()
+    assert REQUIRED_KEYS <= set(data)
+    assert data["duration_s"] == 40.0
+    assert data["violations"] == []
+    assert report.max_landmark_error_mm < 1e-9
+    assert 6.5 < report.max_contour_deviation_mm < 7.5  # model notes: "up to about 7 mm"
+    assert 3.5 < report.max_tool_speed_mm_s < 4.5  # "from 0 to about 4 mm/s"
+    speeds = so.evaluate(paper_problem, baseline, rate_hz=1000.0).peak_joint_speed_rad_s
+    t = np.linspace(0, 40, 400001)
+    assert speeds == pytest.approx(np.max(np.abs(baseline.velocity(t)), axis=0).tolist(), rel=1e-6)
+
+
+def test_mean_tool_speed_is_cut_length_over_time(paper_problem, baseline):
+    report = so.evaluate(paper_problem, baseline)
+    t = np.linspace(0.0, 40.0, 80001)
+    cut = baseline.cut_points(paper_problem.contour, t)
+    length = np.sum(np.linalg.norm(np.diff(cut, axis=0), axis=1)) / MM
+    assert report.mean_tool_speed_mm_s == pytest.approx(length / 40.0, rel=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("limits", "limit_name"),
+    [
+        ({"max_joint_speed": 0.05}, "theta1 speed"),
+        ({"max_joint_acceleration": 0.01}, "theta1 acceleration"),
+        ({"max_joint_jerk": 0.001}, "theta1 jerk"),
+        ({"max_tool_speed": 3.0 * MM}, "tool speed"),
+        ({"contour_tolerance": 0.1 * MM}, "contour deviation"),
+    ],
+)
+def test_each_limit_is_checked(paper_problem, baseline, limits, limit_name):
+    tight = dataclasses.replace(
+        paper_problem, limits=dataclasses.replace(paper_problem.limits, **limits)
+    )
+    report = so.evaluate(tight, baseline)
+    names = [v.limit for v in report.violations]
+    assert limit_name in names
+    violation = report.violations[names.index(limit_name)]
+    assert violation.worst > violation.allowed
+    assert 0.0 <= violation.time_s <= 40.0
+
+
+def test_within_half_a_percent_is_not_a_violation(paper_problem, baseline):
+    peak = max(so.evaluate(paper_problem, baseline).peak_joint_speed_rad_s)
+    limits = dataclasses.replace(paper_problem.limits, max_joint_speed=peak / 1.004)
+    report = so.evaluate(dataclasses.replace(paper_problem, limits=limits), baseline)
+    assert report.violations == []
+    limits = dataclasses.replace(paper_problem.limits, max_joint_speed=peak / 1.006)
+    report = so.evaluate(dataclasses.replace(paper_problem, limits=limits), baseline)
+    assert [v.limit for v in report.violations] == ["theta1 speed"]
+
+
+def test_joint_range_violation(paper_problem, baseline):
+    robot = dataclasses.replace(paper_problem.robot, joint_range=np.radians([[-60, 60], [-29, 0]]))
+    report = so.evaluate(dataclasses.replace(paper_problem, robot=robot), baseline)
+    assert "theta2 lower range" in [v.limit for v in report.violations]
+
+
+def test_singularity_margin_is_reported(paper_problem, baseline):
+    report = so.evaluate(paper_problem, baseline)
+    q = baseline.position(np.linspace(0, 40, 40001))
+    assert report.min_singularity_margin == pytest.approx(
+        kinematics.singularity_margins(q).min(), rel=1e-6
+    )
