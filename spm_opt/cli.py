@@ -21,7 +21,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse, but a usage mistake is one line and status 2 like every other error."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"spm-opt: error: {message} (see {self.prog} --help)\n")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -98,6 +98,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         _COMMANDS[args.command](args)
     except SpmOptError as error:
         print(f"spm-opt: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:  # an output path that cannot be written: the user can fix it
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"spm-opt: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("spm-opt: interrupted", file=sys.stderr)

@@ -79,6 +79,13 @@ class Table:
         if key in self._data:
             return self._data[key]
         if default is _REQUIRED:
+            strays = [k for k in self._data if k not in self._taken]
+            close = difflib.get_close_matches(key, strays, n=1, cutoff=0.6)
+            if close:
+                raise InputError(
+                    f"{self.name(close[0])}: unknown key; did you mean '{key}'? "
+                    "(keys carry their unit, e.g. _mm, _s, _deg)"
+                )
             raise InputError(f"{self.name(key)}: missing (required)")
         return default
 

@@ -24,6 +24,12 @@ from spm_opt.model.actuator import RPM
 from spm_opt.model.params import MM, Robot, load_robot
 
 _SAME_DIRECTION_RAD = 1e-6
+MIN_SEGMENT_DURATION_S = 0.01
+MAX_SEGMENT_DURATION_S = 3600.0
+"""Bounds of one segment's duration, s: shorter is no cut, longer no surgery."""
+MIN_LANDMARK_RADIUS = 0.02
+"""Smallest distance of a landmark on the skull from the isocenter, m (catches metres
+written where millimetres are asked for)."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +107,13 @@ class Problem:
                     f"landmark {name}: z = {point[2] / MM:g} mm lies at or below the isocenter "
                     "plane; the robot reaches only z > 0"
                 )
+            radius, largest = float(np.linalg.norm(point)), self.robot.lower_arc_radius
+            if not MIN_LANDMARK_RADIUS <= radius < largest:
+                raise InputError(
+                    f"landmark {name}: {radius / MM:g} mm from the isocenter; a point on the "
+                    f"skull lies between {MIN_LANDMARK_RADIUS / MM:g} mm and the lower arc's "
+                    f"{largest / MM:g} mm (positions are in mm)"
+                )
         visits = self.visit_order
         for first, second in zip(visits[:-1], visits[1:], strict=True):
             a, b = landmarks[first], landmarks[second]
@@ -122,9 +135,12 @@ class Problem:
                 f"durations, one per segment of the {'closed' if self.closed else 'open'} cut "
                 f"through {len(names)} landmarks"
             )
-        if not np.all(np.isfinite(durations)) or np.any(durations <= 0.0):
+        if not np.all(
+            (durations >= MIN_SEGMENT_DURATION_S) & (durations <= MAX_SEGMENT_DURATION_S)
+        ):
             raise InputError(
-                f"segment_durations_s = {durations.tolist()}: expected finite durations > 0 s"
+                f"segment_durations_s = {durations.tolist()}: expected durations between "
+                f"{MIN_SEGMENT_DURATION_S:g} s and {MAX_SEGMENT_DURATION_S:g} s"
             )
         self.robot.check_reachable(self.platform_points, list(names))
 
@@ -176,11 +192,13 @@ def load_problem(path: str | Path) -> Problem:
         raise root.error("robot", robot_key, f"no robot file at {robot_path}")
     robot = load_robot(robot_path)
     closed = root.boolean("closed", default=False)
-    durations = root.vector("segment_durations_s", minimum=0.0, exclusive_minimum=True)
+    durations = root.vector(
+        "segment_durations_s", minimum=MIN_SEGMENT_DURATION_S, maximum=MAX_SEGMENT_DURATION_S
+    )
     names, points = [], []
     for landmark in root.tables("landmarks"):
         names.append(landmark.string("name"))
-        points.append(landmark.vector("position_mm", length=3) * MM)
+        points.append(landmark.vector("position_mm", length=3, minimum=-1e3, maximum=1e3) * MM)
         landmark.finish()
     limits_table = root.table("limits", required=False)
     limits = _limits(limits_table, robot)

@@ -28,6 +28,9 @@ from spm_opt.files import write_atomically
 from spm_opt.model import kinematics
 
 COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "qdd1", "qdd2")
+MAX_GRID_SAMPLES = 50_000_000
+MAX_DURATION_S = 86_400.0
+"""Longest trajectory a CSV file may hold, s (a day)."""
 DEFAULT_RATE_HZ = 100.0
 _SAME_TIME_S = 1e-9
 
@@ -138,6 +141,11 @@ class Trajectory:
     def time_grid(self, rate_hz: float = DEFAULT_RATE_HZ) -> np.ndarray:
         """Sample times at ``rate_hz`` from the start, with every breakpoint and the end."""
         breaks = self.breakpoints
+        if self.duration * rate_hz > MAX_GRID_SAMPLES:
+            raise InputError(
+                f"trajectory of {self.duration:g} s sampled at {rate_hz:g} Hz: more than "
+                f"{MAX_GRID_SAMPLES:,} samples; shorten it or lower the rate"
+            )
         uniform = self.start_time + np.arange(0.0, self.duration, 1.0 / rate_hz)
         right = np.clip(np.searchsorted(breaks, uniform), 1, len(breaks) - 1)
         gap = np.minimum(np.abs(uniform - breaks[right - 1]), np.abs(breaks[right] - uniform))
@@ -210,12 +218,24 @@ class Trajectory:
                 raise InputError(f"{sidecar}: not valid JSON: {error}") from None
             if not isinstance(metadata, dict):
                 raise InputError(f"{sidecar}: expected a JSON object")
+            _check_landmark_times(sidecar, metadata.get("landmark_times_s"))
         return cls.from_samples(t, q, qd, qdd, metadata)
 
 
 def sidecar_path(path: Path) -> Path:
     """The JSON metadata file beside a trajectory CSV."""
     return path.with_suffix(".json")
+
+
+def _check_landmark_times(sidecar: Path, times: Any) -> None:
+    if times is None:
+        return
+    valid = isinstance(times, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in times
+    )
+    if not valid:
+        shown = json.dumps(times)[:60]
+        raise InputError(f"{sidecar}: landmark_times_s = {shown}: expected a list of times in s")
 
 
 def _jsonable(value: Any) -> Any:
@@ -237,8 +257,8 @@ def _read_samples(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
     except (OSError, UnicodeDecodeError) as error:
         raise InputError(f"{path}: cannot be read ({error})") from None
     if not rows or tuple(c.strip() for c in rows[0]) != COLUMNS:
-        found = ",".join(rows[0]) if rows else "an empty file"
-        raise InputError(f"{path}: header is {found!r}; expected {','.join(COLUMNS)}")
+        found = f"header is {','.join(rows[0])!r}" if rows else "empty file"
+        raise InputError(f"{path}: {found}; expected the header {','.join(COLUMNS)}")
     values = np.empty((len(rows) - 1, len(COLUMNS)))
     for number, row in enumerate(rows[1:], start=2):
         if len(row) != len(COLUMNS):
@@ -256,6 +276,11 @@ def _read_samples(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
             values[number - 2, column] = value
     if len(values) < 2:
         raise InputError(f"{path}: {len(values)} samples; expected at least 2")
+    span = values[-1, 0] - values[0, 0]
+    if span > MAX_DURATION_S:
+        raise InputError(
+            f"{path}: column t spans {span:g} s; expected at most {MAX_DURATION_S:g} s"
+        )
     steps = np.diff(values[:, 0])
     if np.any(steps <= 0.0):
         line = int(np.argmax(steps <= 0.0)) + 3

@@ -132,7 +132,9 @@ def singularity_margin(theta1: Any, theta2: Any) -> Any:
     j1, j2 = direction_jacobian(theta1, theta2)
     a, b, c = dot(j1, j1), dot(j1, j2), dot(j2, j2)
     half_sum, half_diff = (a + c) / 2, (a - c) / 2
-    return m.sqrt(half_sum - m.sqrt(half_diff * half_diff + b * b))
+    # smaller eigenvalue of [[a, b], [b, c]] as det / larger one: no cancellation near 0
+    determinant = dot(cross(j1, j2), cross(j1, j2))
+    return m.sqrt(determinant / (half_sum + m.sqrt(half_diff * half_diff + b * b)))
 
 
 # --- the numpy face ----------------------------------------------------------------

@@ -127,7 +127,9 @@ def load_robot(path: str | Path) -> Robot:
 def _joint_range(joints: Table, key: str) -> np.ndarray:
     low, high = joints.vector(key, length=2, minimum=-89.0, maximum=89.0)
     if low >= high:
-        raise joints.error(key, [low, high], "expected [lower, upper] with lower < upper")
+        raise joints.error(
+            key, [float(low), float(high)], "expected [lower, upper] with lower < upper"
+        )
     return np.array([low, high])
 
 

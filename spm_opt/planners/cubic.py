@@ -14,6 +14,7 @@ import numpy as np
 from numpy.polynomial import Polynomial
 from scipy.interpolate import PPoly
 
+from spm_opt.errors import PlanningError
 from spm_opt.planners.registry import planner_options, register
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
@@ -83,7 +84,10 @@ class CubicPlanner:
         planner_options(problem, self.name)
         times = problem.waypoint_times
         system, rhs = cubic_system(problem.waypoint_angles, problem.segment_durations)
-        solution = np.linalg.solve(system, rhs)
+        try:
+            solution = np.linalg.solve(system, rhs)
+        except np.linalg.LinAlgError as error:
+            raise PlanningError(f"cubic: the system of Table II is singular ({error})") from None
         # (segments, joint, power) -> PPoly's (power, segment, joint), highest power first
         coefficients = solution.reshape(len(times) - 1, 2, 4).transpose(2, 0, 1)
         return Trajectory(

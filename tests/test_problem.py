@@ -1,0 +1,59 @@
+"""Problem and robot files: the shipped ones load, and a problem checks itself."""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import spm_opt as so
+from spm_opt.model.params import MM
+
+PROBLEMS = sorted((Path(__file__).resolve().parents[1] / "problems").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", PROBLEMS, ids=lambda p: p.stem)
+def test_every_shipped_problem_loads_and_plans_within_its_limits(path):
+    problem = so.load_problem(path)
+    report = so.evaluate(problem, so.plan(problem, "cubic"))
+    assert report.violations == []
+    assert report.max_landmark_error_mm < 1e-9
+
+
+def test_paper_problem_in_si(paper_problem):
+    assert paper_problem.robot.upper_platform_radius == pytest.approx(0.17133)
+    assert paper_problem.limits.max_joint_speed == pytest.approx(13.7 * 2 * np.pi / 60)
+    assert paper_problem.visit_names == ["A1", "A2", "A3", "A4", "A1"]
+    np.testing.assert_allclose(np.linalg.norm(paper_problem.platform_points, axis=1), 0.17133)
+    assert len(paper_problem.source_sha256) == 64
+
+
+def test_hardware_problem_is_the_same_flap_faster(paper_problem):
+    hardware = so.load_problem(PROBLEMS[0].parent / "craniotomy_hardware.toml")
+    np.testing.assert_array_equal(hardware.landmarks, paper_problem.landmarks)
+    assert hardware.segment_durations.sum() < paper_problem.segment_durations.sum()
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"landmarks": np.array([[0, 0, 68.08], [0, 0, 68.08]]) * MM}, "same direction"),
+        (
+            {"landmarks": np.array([[0, 0, 0.06808], [-22.14, -11.39, 63.1]]) * MM},
+            "positions are in mm",
+        ),
+        ({"landmarks": np.array([[0, 0, 68.08], [60.0, 0, 10.0]]) * MM}, "landmark A2: θ2"),
+        ({"landmarks": np.array([[0, 0, 68.08], [60.0, 0, -1.0]]) * MM}, "isocenter plane"),
+        ({"segment_durations": np.array([1.0, np.nan])}, "segment_durations_s"),
+        ({"segment_durations": np.array([1.0])}, "expected 2 durations"),
+    ],
+)
+def test_a_problem_built_in_code_checks_itself(paper_problem, change, message):
+    two = {
+        "landmark_names": ("A1", "A2"),
+        "landmarks": paper_problem.landmarks[:2],
+        "closed": True,
+        "segment_durations": np.array([5.0, 5.0]),
+    }
+    with pytest.raises(so.InputError, match=message):
+        dataclasses.replace(paper_problem, **{**two, **change})
