@@ -59,6 +59,11 @@ def _parser() -> argparse.ArgumentParser:
 def _reproduce(args: argparse.Namespace) -> None:
     from spm_opt.reproduce import reproduce
 
+    if not args.problem.is_file():
+        raise InputError(
+            f"--problem {args.problem}: no such file (run from the repository's root, or "
+            "pass --problem with the path of craniotomy_bone_flap.toml)"
+        )
     for path in reproduce(args.problem, args.out):
         print(path)
 

@@ -111,8 +111,10 @@ class Contour:
         )
 
     def nearest(self, directions: np.ndarray) -> Nearest:
-        """The contour point nearest by angle to each unit direction (N, 3)."""
+        """The contour point nearest by angle to each direction (N, 3): unit vectors, or any
+        points (a cut point, B) taken as their direction from the isocenter."""
         p = np.asarray(directions, dtype=float)
+        p = p / np.linalg.norm(p, axis=-1, keepdims=True)
         along = p @ self.start.T  # (N, arcs)
         across = p @ self.inplane.T
         angle = np.arctan2(across, along)
@@ -143,7 +145,8 @@ class Contour:
         return self.nearest(directions).radius[:, None] * np.asarray(directions, dtype=float)
 
     def deviation(self, directions: np.ndarray) -> np.ndarray:
-        """Distance (N,), m, of the cut point in each direction from the contour.
+        """Distance (N,), m, of the cut point in each direction (or of each cut point) from
+        the contour.
 
         The chord 2 ρ sin(δ/2) between the cut point and the nearest contour point, with δ
         the angle between them and ρ the skull radius there.

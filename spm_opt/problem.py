@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from spm_opt.contour import Contour
-from spm_opt.errors import InputError, UnreachableError
+from spm_opt.errors import InputError
 from spm_opt.fields import Table, read_toml
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import RPM
@@ -102,11 +102,6 @@ class Problem:
         for name, point in zip(names, landmarks, strict=True):
             if not np.all(np.isfinite(point)):
                 raise InputError(f"landmark {name}: position {point / MM} mm must be finite")
-            if point[2] <= 0.0:
-                raise UnreachableError(
-                    f"landmark {name}: z = {point[2] / MM:g} mm lies at or below the isocenter "
-                    "plane; the robot reaches only z > 0"
-                )
             radius, largest = float(np.linalg.norm(point)), self.robot.lower_arc_radius
             if not MIN_LANDMARK_RADIUS <= radius < largest:
                 raise InputError(

@@ -56,7 +56,9 @@ def test_deviation_of_a_direction_tilted_off_the_arc(along, tilt):
     )
     deviation = contour.deviation(direction[None, :])[0]
     assert deviation == pytest.approx(2 * R * np.sin(abs(tilt) / 2), rel=1e-9, abs=1e-15)
-    np.testing.assert_allclose(np.linalg.norm(contour.cut_points(direction[None, :])), R)
+    cut = contour.cut_points(direction[None, :])
+    np.testing.assert_allclose(np.linalg.norm(cut), R)
+    assert contour.deviation(cut)[0] == pytest.approx(deviation, rel=1e-12, abs=1e-18)
 
 
 def test_deviation_beyond_the_arc_end_is_the_distance_to_the_landmark():
