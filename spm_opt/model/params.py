@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,33 +18,91 @@ DEG = math.pi / 180.0
 
 
 @dataclass(frozen=True)
+class Body:
+    """One rigid body of the robot.
+
+    Attributes
+    ----------
+    mass : float, kg
+    com_radius : float, m
+        Distance of the mass centre from the isocenter: along B for the platforms, along the
+        arc's symmetry axis (z at θ = 0) for the arcs.
+    inertia : ndarray, shape (3, 3), kg·m²
+        About the mass centre, in the body frame (Eq. 17 for platforms, Eq. 16 for arcs).
+    rail_radius : float or None, m
+        The arc's rail radius (arcs only).
+    """
+
+    mass: float
+    com_radius: float
+    inertia: np.ndarray
+    rail_radius: float | None = None
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A tool carried rigidly by the upper platform: point mass, offset in its frame (m)."""
+
+    mass: float = 0.0
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Coulomb friction of the platforms on their rails (Section 5, Eqs. 20–22).
+
+    ``mu`` is the friction coefficient; ``smoothing`` (rad/s) is the sliding rate below
+    which optimisers see a smooth sign, v / sqrt(v² + smoothing²).
+    """
+
+    mu: float = 0.0
+    smoothing: float = 1e-3
+
+
+@dataclass(frozen=True)
 class Robot:
-    """Geometry and limits of one spherical parallel manipulator.
+    """Geometry, inertia, friction and limits of one spherical parallel manipulator.
 
     Attributes
     ----------
     name : str
-    upper_platform_radius : float, m
-        r_u, distance of the upper platform's mass centre B from the isocenter.
-    lower_platform_radius : float, m
-        r_L, distance of the lower platform's mass centre D = (r_L / r_u) B.
-    upper_arc_radius, lower_arc_radius : float, m
-        Radii of the two input arcs (rails).
+    upper_platform, lower_platform, upper_arc, lower_arc : Body
+    payload : Payload
+    friction : Friction
     joint_range : ndarray, shape (2, 2), rad
         Rows (lower, upper) for θ1 and θ2.
     min_singularity_margin : float
         Smallest allowed value of :func:`kinematics.singularity_margin` (1 at θ = 0).
     actuator : Actuator
+    gravity : float, m/s²
     """
 
     name: str
-    upper_platform_radius: float
-    lower_platform_radius: float
-    upper_arc_radius: float
-    lower_arc_radius: float
+    upper_platform: Body
+    lower_platform: Body
+    upper_arc: Body
+    lower_arc: Body
     joint_range: np.ndarray
     min_singularity_margin: float
     actuator: Actuator
+    payload: Payload = field(default_factory=Payload)
+    friction: Friction = field(default_factory=Friction)
+    gravity: float = 9.81
+
+    @property
+    def upper_platform_radius(self) -> float:
+        """r_u, m: distance of the upper platform's mass centre B from the isocenter."""
+        return self.upper_platform.com_radius
+
+    @property
+    def lower_platform_radius(self) -> float:
+        """r_L, m: the lower platform's mass centre is D = (r_L / r_u) B."""
+        return self.lower_platform.com_radius
+
+    @property
+    def lower_arc_radius(self) -> float:
+        """Rail radius of the lower arc, m: the head must fit inside it."""
+        return self.lower_arc.rail_radius
 
     def unreachable_reason(self, q: np.ndarray) -> list[str | None]:
         """For joint angles (N, 2), rad: why each configuration cannot be taken, or None."""
@@ -97,31 +155,77 @@ def load_robot(path: str | Path) -> Robot:
     root = Table(read_toml(path), str(path))
     name = root.string("name")
     root.string("description", default="")
-    upper_platform = root.table("upper_platform")
-    lower_platform = root.table("lower_platform")
-    upper_arc = root.table("upper_arc")
-    lower_arc = root.table("lower_arc")
+    bodies = {key: _body(root.table(key), arc=key.endswith("_arc")) for key in _BODIES}
     joints = root.table("joints")
-    actuator = root.table("actuator")
-    positive = {"minimum": 0.0, "exclusive_minimum": True}
+    joint_range = np.array(
+        [_joint_range(joints, "theta1_range_deg"), _joint_range(joints, "theta2_range_deg")]
+    )
+    margin = joints.number("min_singularity_margin", minimum=0.0, maximum=1.0,
+                           exclusive_minimum=True)
+    joints.finish()
     robot = Robot(
         name=name,
-        upper_platform_radius=upper_platform.number("com_radius_mm", **positive) * MM,
-        lower_platform_radius=lower_platform.number("com_radius_mm", **positive) * MM,
-        upper_arc_radius=upper_arc.number("rail_radius_mm", **positive) * MM,
-        lower_arc_radius=lower_arc.number("rail_radius_mm", **positive) * MM,
-        joint_range=np.array(
-            [_joint_range(joints, "theta1_range_deg"), _joint_range(joints, "theta2_range_deg")]
-        )
-        * DEG,
-        min_singularity_margin=joints.number(
-            "min_singularity_margin", minimum=0.0, maximum=1.0, exclusive_minimum=True
-        ),
-        actuator=_actuator(actuator),
+        **bodies,
+        joint_range=joint_range * DEG,
+        min_singularity_margin=margin,
+        actuator=_actuator(root.table("actuator")),
+        payload=_payload(root.table("payload", required=False)),
+        friction=_friction(root.table("friction", required=False)),
     )
-    for table in (upper_platform, lower_platform, upper_arc, lower_arc, joints, actuator, root):
-        table.finish()
+    root.finish()
     return robot
+
+
+_BODIES = ("upper_platform", "lower_platform", "upper_arc", "lower_arc")
+_POSITIVE = {"minimum": 0.0, "exclusive_minimum": True}
+
+
+def _body(table: Table, arc: bool) -> Body:
+    body = Body(
+        mass=table.number("mass_kg", minimum=0.0),
+        com_radius=table.number("com_radius_mm", minimum=0.0) * MM,
+        inertia=_inertia(table),
+        rail_radius=table.number("rail_radius_mm", **_POSITIVE) * MM if arc else None,
+    )
+    table.finish()
+    return body
+
+
+def _inertia(table: Table) -> np.ndarray:
+    key = "inertia_kg_m2"
+    value = table.raw(key)
+    rows = value if isinstance(value, list) and len(value) == 3 else None
+    if rows is None or not all(isinstance(r, list) and len(r) == 3 for r in rows):
+        raise table.error(key, value, "expected a 3×3 matrix [[..], [..], [..]]")
+    flat = [v for row in rows for v in row]
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in flat) or not all(
+        math.isfinite(v) for v in flat
+    ):
+        raise table.error(key, value, "expected finite numbers")
+    inertia = np.array(rows, dtype=float)
+    if not np.allclose(inertia, inertia.T, rtol=0.0, atol=1e-12):
+        raise table.error(key, value, "expected a symmetric matrix")
+    if np.min(np.linalg.eigvalsh(inertia)) < -1e-12:
+        raise table.error(key, value, "expected a positive semi-definite matrix")
+    return inertia
+
+
+def _payload(table: Table) -> Payload:
+    payload = Payload(
+        mass=table.number("mass_kg", minimum=0.0, default=0.0),
+        offset=table.vector("offset_mm", length=3, default=np.zeros(3)) * MM,
+    )
+    table.finish()
+    return payload
+
+
+def _friction(table: Table) -> Friction:
+    friction = Friction(
+        mu=table.number("mu", minimum=0.0, maximum=2.0, default=0.0),
+        smoothing=table.number("smoothing_rad_s", default=1e-3, **_POSITIVE),
+    )
+    table.finish()
+    return friction
 
 
 def _joint_range(joints: Table, key: str) -> np.ndarray:
@@ -134,4 +238,6 @@ def _joint_range(joints: Table, key: str) -> np.ndarray:
 
 
 def _actuator(table: Table) -> Actuator:
-    return ACTUATORS[table.string("model", choices=tuple(ACTUATORS))]
+    actuator = ACTUATORS[table.string("model", choices=tuple(ACTUATORS))]
+    table.finish()
+    return actuator
