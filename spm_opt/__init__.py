@@ -18,6 +18,7 @@ from spm_opt.errors import (
     UnreachableError,
 )
 from spm_opt.evaluate import Report, Violation, evaluate
+from spm_opt.model.dynamics import inverse_dynamics, mechanical_energy
 from spm_opt.model.params import Robot, load_robot
 from spm_opt.planners import PLANNERS, plan
 from spm_opt.problem import Limits, Problem, load_problem
@@ -42,6 +43,8 @@ __all__ = [
     "UnreachableError",
     "Violation",
     "evaluate",
+    "inverse_dynamics",
+    "mechanical_energy",
     "load_problem",
     "load_robot",
     "plan",

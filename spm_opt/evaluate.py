@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from spm_opt.model import kinematics
+from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
@@ -40,7 +40,13 @@ class Violation:
 
 @dataclass(frozen=True)
 class Report:
-    """What the evaluator measured. Units are in the names; per-joint values are lists."""
+    """What the evaluator measured. Units are in the names; per-joint values are lists.
+
+    Torques are the model's inverse dynamics with exact friction. ``torque_margin`` is
+    1 − peak / continuous torque per actuator; ``energy_j`` is ∫ Σ|τ·θ̇| dt (the mechanical
+    work the actuators put in, braking counted as work too) and ``effort_n2m2s`` is
+    ∫ τᵀτ dt.
+    """
 
     planner: str | None
     duration_s: float
@@ -57,6 +63,11 @@ class Report:
     max_landmark_error_mm: float
     min_singularity_margin: float
     contour_length_mm: float
+    peak_torque_nm: list[float]
+    rms_torque_nm: list[float]
+    torque_margin: list[float]
+    energy_j: float
+    effort_n2m2s: float
     violations: list[Violation] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
@@ -123,6 +134,10 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
     tool_speed = contour.tool_speed(directions, rates)
     margins = kinematics.singularity_margins(q)
+    torque = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
+    continuous_torque = robot.actuator.continuous_torque_nm
+    peak_torque = np.max(np.abs(torque), axis=0)
+    duration = t[-1] - t[0]
     mean_speed = float(_time_mean(tool_speed, t))
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
     landmark_errors = _landmark_errors(problem, trajectory, t, directions)
@@ -139,6 +154,7 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
             f"{name} acceleration", np.abs(qdd[:, joint]), limits.max_joint_acceleration, "rad/s^2"
         )
         checks.relative(f"{name} jerk", np.abs(jerk[:, joint]), limits.max_joint_jerk, "rad/s^3")
+        checks.relative(f"{name} torque", np.abs(torque[:, joint]), continuous_torque, "N*m")
     if limits.max_tool_speed is not None:
         checks.relative("tool speed", tool_speed / MM, limits.max_tool_speed / MM, "mm/s")
     if limits.contour_tolerance is not None:
@@ -173,6 +189,11 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
         max_landmark_error_mm=max(v["error_mm"] for v in landmark_errors),
         min_singularity_margin=float(np.min(margins)),
         contour_length_mm=contour.length / MM,
+        peak_torque_nm=peak_torque.tolist(),
+        rms_torque_nm=np.sqrt(_time_mean(torque**2, t)).tolist(),
+        torque_margin=(1.0 - peak_torque / continuous_torque).tolist(),
+        energy_j=float(np.trapezoid(np.sum(np.abs(torque * qd), axis=1), t)),
+        effort_n2m2s=float(_time_mean(np.sum(torque**2, axis=1), t) * duration),
         violations=checks.found,
     )
 

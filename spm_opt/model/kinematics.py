@@ -96,8 +96,15 @@ def frames(theta1: Any, theta2: Any) -> tuple[tuple[Vec, Vec, Vec], tuple[Vec, V
     Upper: y_u = N_u, z_u = B/r_u, x_u = y_u × z_u. Lower: x_L = N_L, z_L = B/r_u,
     y_L = z_L × x_L.
     """
+    return frames_at(direction(theta1, theta2), theta1, theta2)
+
+
+def frames_at(
+    b: Vec, theta1: Any, theta2: Any
+) -> tuple[tuple[Vec, Vec, Vec], tuple[Vec, Vec, Vec]]:
+    """Eq. 17 as the paper writes it, in the redundant coordinates: columns of the upper and
+    lower platform rotation matrices for a unit direction b = B / r_u and joint angles θ."""
     n_u, n_l = arc_normals(theta1, theta2)
-    b = direction(theta1, theta2)
     return (cross(n_u, b), n_u, b), (n_l, cross(b, n_l), b)
 
 
