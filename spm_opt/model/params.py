@@ -160,8 +160,9 @@ def load_robot(path: str | Path) -> Robot:
     joint_range = np.array(
         [_joint_range(joints, "theta1_range_deg"), _joint_range(joints, "theta2_range_deg")]
     )
-    margin = joints.number("min_singularity_margin", minimum=0.0, maximum=1.0,
-                           exclusive_minimum=True)
+    margin = joints.number(
+        "min_singularity_margin", minimum=0.0, maximum=1.0, exclusive_minimum=True
+    )
     joints.finish()
     robot = Robot(
         name=name,
