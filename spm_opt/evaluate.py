@@ -42,10 +42,11 @@ class Violation:
 class Report:
     """What the evaluator measured. Units are in the names; per-joint values are lists.
 
-    Torques are the model's inverse dynamics with exact friction. ``torque_margin`` is
-    1 − peak / continuous torque per actuator; ``energy_j`` is ∫ Σ|τ·θ̇| dt (the mechanical
-    work the actuators put in, braking counted as work too) and ``effort_n2m2s`` is
-    ∫ τᵀτ dt.
+    Torques are the model's inverse dynamics with exact friction, as the actuators deliver
+    them (with their reflected rotor inertia and gear efficiency, when the robot has them).
+    ``torque_margin`` is 1 − peak / continuous torque per actuator; ``energy_j`` is
+    ∫ Σ|τ·θ̇| dt (the mechanical work the actuators put in, braking counted as work too)
+    and ``effort_n2m2s`` is ∫ τᵀτ dt.
     """
 
     planner: str | None
@@ -134,7 +135,8 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
     tool_speed = contour.tool_speed(directions, rates)
     margins = kinematics.singularity_margins(q)
-    torque = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
+    load = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
+    torque = robot.actuator.drive_torque(load, qd, qdd)
     continuous_torque = robot.actuator.continuous_torque_nm
     peak_torque = np.max(np.abs(torque), axis=0)
     duration = t[-1] - t[0]

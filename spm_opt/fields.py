@@ -70,6 +70,10 @@ class Table:
         """An error naming ``key``, its ``value`` and what is ``allowed``."""
         return InputError(f"{self.name(key)} = {_describe(value)}: {allowed}")
 
+    def has(self, key: str) -> bool:
+        """Whether the table holds ``key``."""
+        return key in self._data
+
     def keys(self) -> list[str]:
         """The keys present in the table."""
         return list(self._data)

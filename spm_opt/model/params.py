@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -11,7 +12,7 @@ import numpy as np
 from spm_opt.errors import UnreachableError
 from spm_opt.fields import Table, read_toml
 from spm_opt.model import kinematics
-from spm_opt.model.actuator import ACTUATORS, Actuator
+from spm_opt.model.actuator import ACTUATORS, Actuator, CurrentTorqueMap
 
 MM = 1e-3
 DEG = math.pi / 180.0
@@ -239,6 +240,26 @@ def _joint_range(joints: Table, key: str) -> np.ndarray:
 
 
 def _actuator(table: Table) -> Actuator:
-    actuator = ACTUATORS[table.string("model", choices=tuple(ACTUATORS))]
+    datasheet = ACTUATORS[table.string("model", choices=tuple(ACTUATORS))]
+    current_map = datasheet.current_map
+    if table.has("current_a") or table.has("torque_nm"):
+        currents = table.vector("current_a", minimum=0.0)
+        torques = table.vector("torque_nm", minimum=0.0)
+        if len(currents) != len(torques) or len(currents) < 2:
+            raise table.error(
+                "torque_nm", torques.tolist(), "expected one torque per current_a, at least 2"
+            )
+        for key, values in (("current_a", currents), ("torque_nm", torques)):
+            if values[0] != 0.0 or np.any(np.diff(values) <= 0.0):
+                raise table.error(key, values.tolist(), "expected values rising strictly from 0")
+        current_map = CurrentTorqueMap(tuple(currents.tolist()), tuple(torques.tolist()))
+    actuator = dataclasses.replace(
+        datasheet,
+        current_map=current_map,
+        rotor_inertia_kg_m2=table.number("rotor_inertia_kg_m2", minimum=0.0, default=0.0),
+        gear_efficiency=table.number(
+            "gear_efficiency", minimum=0.0, maximum=1.0, exclusive_minimum=True, default=1.0
+        ),
+    )
     table.finish()
     return actuator
