@@ -26,8 +26,13 @@ TARGET_RMS_NM = np.array([0.11, 0.10])  # Table IV, friction off
 
 def rms_torques(robot: so.Robot, trajectory: so.Trajectory) -> np.ndarray:
     t = trajectory.time_grid(100.0)
-    torque = inverse_dynamics(robot, trajectory.position(t), trajectory.velocity(t),
-                              trajectory.acceleration(t), friction=False)
+    torque = inverse_dynamics(
+        robot,
+        trajectory.position(t),
+        trajectory.velocity(t),
+        trajectory.acceleration(t),
+        friction=False,
+    )
     return np.sqrt(np.trapezoid(torque**2, t, axis=0) / trajectory.duration)
 
 
@@ -44,11 +49,17 @@ def main() -> None:
     trajectory = so.plan(problem, "cubic")
     robot = problem.robot
     print(f"RMS torques with the file's values: {rms_torques(robot, trajectory)} N·m")
-    fit = least_squares(lambda s: rms_torques(with_arc_scales(robot, s), trajectory) - TARGET_RMS_NM,
-                        x0=[1.0, 1.0], bounds=([0.0, 0.0], [10.0, 10.0]), xtol=1e-14, ftol=1e-14)
+    fit = least_squares(
+        lambda s: rms_torques(with_arc_scales(robot, s), trajectory) - TARGET_RMS_NM,
+        x0=[1.0, 1.0],
+        bounds=([0.0, 0.0], [10.0, 10.0]),
+        xtol=1e-14,
+        ftol=1e-14,
+    )
     calibrated = with_arc_scales(robot, fit.x)
     print(f"scales of the arcs' masses: {fit.x}")
-    print(f"RMS torques calibrated: {rms_torques(calibrated, trajectory)} N·m (target {TARGET_RMS_NM})")
+    calibrated_rms = rms_torques(calibrated, trajectory)
+    print(f"RMS torques calibrated: {calibrated_rms} N·m (target {TARGET_RMS_NM})")
     for name in ("upper_arc", "lower_arc"):
         arc = getattr(calibrated, name)
         inertia = ", ".join(f"[{', '.join(f'{v:.5g}' for v in row)}]" for row in arc.inertia)

@@ -69,3 +69,9 @@ TABLE_III_COEFFICIENTS: dict[int, dict[str, str]] = {
 }
 """Eq. 3 coefficients per segment, θ in degrees and t in absolute seconds:
 θ1 = a t³ + b t² + c t + d, θ2 = e t³ + f t² + g t + h (Table III)."""
+
+TABLE_IV_RMS_TORQUE_NM: tuple[str, str] = ("0.11", "0.10")
+"""RMS actuator torques over the 40 s trajectory by the Lagrange method, N·m (Table IV)."""
+
+TABLE_IV_DEVIATION_PERCENT: tuple[str, str] = ("0.29", "0.22")
+"""RMS difference between the Lagrange method and SimMechanics, percent of the RMS torque."""

@@ -126,3 +126,67 @@ def _top_view(axis, problem: Problem, contour: np.ndarray, cut: np.ndarray) -> N
     axis.set_ylabel("y (mm)")
     axis.set_title("seen from above")
     axis.legend(loc="best", fontsize=8)
+
+
+def torques_figure(
+    t: np.ndarray, torque: np.ndarray, with_friction: np.ndarray, differences: dict[str, np.ndarray]
+) -> Figure:
+    """Fig. 13: actuator torques without friction (and with the prototype's), and the
+    differences to the independent checks, all in N·m over time in s."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(10, 7), layout="constrained")
+    axes = figure.subplots(2, 2, sharex=True)
+    for joint, colour in enumerate(_JOINT_COLOURS):
+        top, bottom = axes[0, joint], axes[1, joint]
+        top.plot(t, torque[:, joint], color=colour, label="Lagrange, no friction (Table IV)")
+        top.plot(
+            t,
+            with_friction[:, joint],
+            color=colour,
+            linestyle="--",
+            alpha=0.7,
+            label="with friction, μ = 0.24",
+        )
+        top.set_title(f"torque {joint + 1}")
+        top.set_ylabel("torque (N·m)")
+        top.legend(fontsize=8)
+        for (name, difference), style in zip(differences.items(), ("-", ":"), strict=False):
+            bottom.plot(t, difference[:, joint], linestyle=style, label=f"Lagrange − {name}")
+        bottom.set_ylabel("difference (N·m)")
+        bottom.set_xlabel("time (s)")
+        bottom.legend(fontsize=8)
+        for axis in (top, bottom):
+            axis.grid(True, alpha=0.3)
+    figure.suptitle("Fig. 13: actuator torques over the paper's trajectory")
+    return figure
+
+
+def friction_figure(
+    t: np.ndarray, upper: np.ndarray, lower: np.ndarray, torque: np.ndarray, mu: float
+) -> Figure:
+    """Fig. 14: friction forces on the platforms with μ = 1 (N, by component), and the
+    actuator torque they cost with the prototype's μ (N·m)."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(10, 8), layout="constrained")
+    axes = figure.subplots(3, 1, sharex=True)
+    for axis, force, name in (
+        (axes[0], upper, "F_fu, upper platform"),
+        (axes[1], lower, "F_fl, lower platform"),
+    ):
+        for component, label in enumerate("xyz"):
+            axis.plot(t, force[:, component], label=f"{label}")
+        axis.set_ylabel("force (N)")
+        axis.set_title(f"{name}, μ = 1")
+        axis.legend(fontsize=8, ncol=3)
+    for joint, colour in enumerate(_JOINT_COLOURS):
+        axes[2].plot(t, torque[:, joint], color=colour, label=f"actuator {joint + 1}")
+    axes[2].set_title(f"torque that friction costs the actuators, μ = {mu:g}")
+    axes[2].set_ylabel("torque (N·m)")
+    axes[2].set_xlabel("time (s)")
+    axes[2].legend(fontsize=8)
+    for axis in axes:
+        axis.grid(True, alpha=0.3)
+    figure.suptitle("Fig. 14: friction along the paper's trajectory")
+    return figure
