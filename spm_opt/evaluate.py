@@ -44,7 +44,8 @@ class Report:
 
     Torques are the model's inverse dynamics with exact friction, as the actuators deliver
     them (with their reflected rotor inertia and gear efficiency, when the robot has them).
-    ``torque_margin`` is 1 − peak / continuous torque per actuator; ``energy_j`` is
+    ``torque_margin`` is 1 − peak / continuous torque per actuator, ``current_margin`` the
+    same for the motor current the actuator's current map gives; ``energy_j`` is
     ∫ Σ|τ·θ̇| dt (the mechanical work the actuators put in, braking counted as work too)
     and ``effort_n2m2s`` is ∫ τᵀτ dt.
     """
@@ -67,6 +68,8 @@ class Report:
     peak_torque_nm: list[float]
     rms_torque_nm: list[float]
     torque_margin: list[float]
+    peak_current_a: list[float]
+    current_margin: list[float]
     energy_j: float
     effort_n2m2s: float
     violations: list[Violation] = field(default_factory=list)
@@ -139,6 +142,7 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     torque = robot.actuator.drive_torque(load, qd, qdd)
     continuous_torque = robot.actuator.continuous_torque_nm
     peak_torque = np.max(np.abs(torque), axis=0)
+    peak_current = np.max(np.abs(robot.actuator.current_map.current(torque)), axis=0)
     duration = t[-1] - t[0]
     mean_speed = float(_time_mean(tool_speed, t))
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
@@ -194,6 +198,8 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
         peak_torque_nm=peak_torque.tolist(),
         rms_torque_nm=np.sqrt(_time_mean(torque**2, t)).tolist(),
         torque_margin=(1.0 - peak_torque / continuous_torque).tolist(),
+        peak_current_a=peak_current.tolist(),
+        current_margin=(1.0 - peak_current / robot.actuator.continuous_current_a).tolist(),
         energy_j=float(np.trapezoid(np.sum(np.abs(torque * qd), axis=1), t)),
         effort_n2m2s=float(_time_mean(np.sum(torque**2, axis=1), t) * duration),
         violations=checks.found,

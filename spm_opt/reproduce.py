@@ -177,6 +177,10 @@ def table3_markdown(rows: list[Table3Row]) -> str:
     return "\n".join(lines) + "\n"
 
 
+OPEN_LOOP_S = (1.0, 1.0)
+"""Start and length, s, of the open-loop MuJoCo run along the baseline."""
+
+
 @dataclass(frozen=True)
 class Table4Row:
     """Table IV for one actuator: our RMS torque and the RMS differences to the two
@@ -204,6 +208,10 @@ class TorqueResults:
     friction_lower: np.ndarray
     friction_torque: np.ndarray
     rows: list[Table4Row]
+    power_balance_relative: float
+    """max |τ·θ̇ − d(K+U)/dt| over max |d(K+U)/dt|, without friction."""
+    open_loop_deviation_deg: float
+    """Largest deviation of MuJoCo's open-loop run from the plan over OPEN_LOOP_S, deg."""
 
 
 def torque_results(
@@ -212,7 +220,7 @@ def torque_results(
     """Table IV, Fig. 13 and Fig. 14: torques without friction by the Lagrange model, the
     minimal-coordinate derivation and MuJoCo, and friction with μ = 1 and the robot's μ."""
     from spm_opt.verify.minimal_coordinates import minimal_inverse_dynamics
-    from spm_opt.verify.multibody import multibody_inverse_dynamics
+    from spm_opt.verify.multibody import multibody_inverse_dynamics, open_loop_deviation
 
     robot = problem.robot
     t = trajectory.time_grid(rate_hz)
@@ -222,6 +230,7 @@ def torque_results(
         "minimal coordinates": torque - minimal_inverse_dynamics(robot, q, qd, qdd, friction=False),
         "MuJoCo": torque - multibody_inverse_dynamics(robot, q, qd, qdd),
     }
+    energy_rate = dynamics.energy_rate(robot, q, qd, qdd)
     unit_friction = dataclasses.replace(robot, friction=dataclasses.replace(robot.friction, mu=1.0))
     upper, lower = dynamics.friction_forces(unit_friction, q, qd)
 
@@ -252,6 +261,10 @@ def torque_results(
         friction_lower=lower,
         friction_torque=dynamics.friction_torque(robot, q, qd),
         rows=rows,
+        power_balance_relative=float(
+            np.max(np.abs(np.sum(torque * qd, axis=1) - energy_rate)) / np.max(np.abs(energy_rate))
+        ),
+        open_loop_deviation_deg=open_loop_deviation(robot, trajectory, *OPEN_LOOP_S) / DEG,
     )
 
 
@@ -263,7 +276,8 @@ def table4_csv(rows: list[Table4Row]) -> str:
     return buffer.getvalue()
 
 
-def table4_markdown(rows: list[Table4Row], mu: float) -> str:
+def table4_markdown(results: TorqueResults, mu: float) -> str:
+    rows = results.rows
     lines = [
         "# Table IV reproduced",
         "",
@@ -286,6 +300,16 @@ def table4_markdown(rows: list[Table4Row], mu: float) -> str:
             f"| {r.minimal_coordinates_deviation_percent:.2e} "
             f"| {r.multibody_deviation_percent:.2e} | {r.printed_simmechanics_deviation_percent} |"
         )
+    start, length = OPEN_LOOP_S
+    lines += [
+        "",
+        "Further checks along the same trajectory:",
+        "",
+        f"- power balance without friction: max |τ·θ̇ − d(K+U)/dt| is "
+        f"{results.power_balance_relative:.2e} of max |d(K+U)/dt|;",
+        f"- MuJoCo's open-loop run under its own torques from {start:g} s for {length:g} s "
+        f"stays within {results.open_loop_deviation_deg:.2e}° of the plan.",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -314,7 +338,7 @@ def reproduce(problem_path: str | Path, out_dir: str | Path) -> list[Path]:
     torques = torque_results(problem, trajectory)
     contents.update(
         {
-            out / "table4.md": table4_markdown(torques.rows, problem.robot.friction.mu),
+            out / "table4.md": table4_markdown(torques, problem.robot.friction.mu),
             out / "table4.csv": table4_csv(torques.rows),
             out / "fig13_torques.png": plots.to_png(
                 plots.torques_figure(

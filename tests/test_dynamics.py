@@ -2,7 +2,6 @@
 
 import dataclasses
 
-import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -35,13 +34,7 @@ def test_table_iv_rms_torques_without_friction(robot, baseline):
 
 
 def energy_rate(robot, q, qd, qdd):
-    """d(K + U)/dt = ∂E/∂q q̇ + ∂E/∂q̇ q̈, by CasADi's derivative of the energy alone."""
-    qs, qds = ca.SX.sym("q", 2), ca.SX.sym("qd", 2)
-    kinetic, potential = dynamics._model().energy(qs, qds, dynamics.parameter_vector(robot))
-    total = kinetic + potential
-    qdds = ca.SX.sym("qdd", 2)
-    expression = ca.jtimes(total, qs, qd) + ca.jtimes(total, qds, qdds)
-    return float(ca.Function("rate", [qs, qds, qdds], [expression])(q, qd, qdd))
+    return float(dynamics.energy_rate(robot, q, qd, qdd)[0])
 
 
 @settings(max_examples=40, deadline=None)

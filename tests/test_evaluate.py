@@ -17,6 +17,11 @@ REQUIRED_KEYS = {
     "max_tool_speed_mm_s",
     "mean_tool_speed_mm_s",
     "max_landmark_error_mm",
+    "peak_torque_nm",
+    "rms_torque_nm",
+    "torque_margin",
+    "current_margin",
+    "energy_j",
     "violations",
 }
 
@@ -85,6 +90,27 @@ def test_mean_tool_speed_is_cut_length_over_time(paper_problem, baseline):
     cut = baseline.cut_points(paper_problem.contour, t)
     length = np.sum(np.linalg.norm(np.diff(cut, axis=0), axis=1)) / MM
     assert report.mean_tool_speed_mm_s == pytest.approx(length / 40.0, rel=1e-4)
+
+
+def test_torque_figures_from_the_second_derivation(paper_problem, baseline):
+    """Peak, RMS, margins and energy re-measured with the minimal-coordinate derivation
+    (exact friction) on a finer grid of our own."""
+    from spm_opt.verify.minimal_coordinates import minimal_inverse_dynamics
+
+    report = so.evaluate(paper_problem, baseline)
+    t = np.linspace(0.0, 40.0, 64001)
+    q, qd, qdd = baseline.position(t), baseline.velocity(t), baseline.acceleration(t)
+    torque = minimal_inverse_dynamics(paper_problem.robot, q, qd, qdd, friction=True)
+    peak = np.max(np.abs(torque), axis=0)
+    assert report.peak_torque_nm == pytest.approx(peak.tolist(), rel=1e-3)
+    assert report.rms_torque_nm == pytest.approx(np.sqrt(np.mean(torque**2, axis=0)), rel=1e-3)
+    assert report.torque_margin == pytest.approx((1 - peak / 14.0).tolist(), rel=1e-6)
+    # the default current map is the line through the continuous ratings (1.9 A, 14 N·m)
+    assert report.peak_current_a == pytest.approx((peak * 1.9 / 14.0).tolist(), rel=1e-3)
+    assert report.current_margin == pytest.approx(report.torque_margin, rel=1e-9)
+    work = np.mean(np.sum(np.abs(torque * qd), axis=1)) * 40.0
+    assert report.energy_j == pytest.approx(work, rel=1e-3)
+    assert report.effort_n2m2s == pytest.approx(np.mean(np.sum(torque**2, axis=1)) * 40, rel=1e-3)
 
 
 @pytest.mark.parametrize(

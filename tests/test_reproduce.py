@@ -123,6 +123,8 @@ def test_table_iv_matches_the_paper_and_both_checks(paper_problem, baseline):
         assert abs(row.rms_torque_nm - float(row.printed_rms_torque_nm)) <= 0.005
         assert row.minimal_coordinates_deviation_percent < 1e-9
         assert row.multibody_deviation_percent < 1e-9
+    assert results.power_balance_relative < 1e-9
+    assert results.open_loop_deviation_deg < 0.01
     # friction only adds: with μ > 0 the RMS torque grows on both actuators
     rms = np.sqrt(np.mean(results.with_friction**2, axis=0))
     assert np.all(rms > [row.rms_torque_nm for row in results.rows])

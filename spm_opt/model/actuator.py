@@ -58,7 +58,7 @@ class Actuator:
     Attributes
     ----------
     model : str
-    continuous_speed_rad_s, continuous_torque_nm : float
+    continuous_speed_rad_s, continuous_torque_nm, continuous_current_a : float
         Datasheet continuous ratings.
     pulses_per_rev : int
         Encoder resolution at the output.
@@ -74,6 +74,7 @@ class Actuator:
     model: str
     continuous_speed_rad_s: float
     continuous_torque_nm: float
+    continuous_current_a: float
     pulses_per_rev: int
     velocity_unit_rpm: float
     current_unit_a: float
@@ -129,6 +130,7 @@ ACTUATORS: dict[str, Actuator] = {
         model="L54-50-S500-R",
         continuous_speed_rad_s=13.7 * RPM,
         continuous_torque_nm=14.0,
+        continuous_current_a=1.9,
         pulses_per_rev=361_384,
         velocity_unit_rpm=0.00199234,
         current_unit_a=0.01611328,

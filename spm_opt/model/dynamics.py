@@ -391,6 +391,23 @@ def mechanical_energy(robot: Robot, q: np.ndarray, qd: np.ndarray) -> tuple[np.n
     return kinetic.full().ravel(), potential.full().ravel()
 
 
+@cache
+def _energy_rate() -> ca.Function:
+    """d(K + U)/dt = ∂E/∂q q̇ + ∂E/∂q̇ q̈, differentiated from the energy alone."""
+    q, qd, qdd = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("qdd", 2)
+    parameters = ca.SX.sym("parameters", _model().energy.size1_in(2))
+    kinetic, potential = _model().energy(q, qd, parameters)
+    total = kinetic + potential
+    rate = ca.jtimes(total, q, qd) + ca.jtimes(total, qd, qdd)
+    return ca.Function("energy_rate", [q, qd, qdd, parameters], [rate])
+
+
+def energy_rate(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """Rate of change of the mechanical energy K + U, (N,), W, along a motion. Without
+    friction it equals the actuators' power τ·θ̇ (the power balance)."""
+    return _energy_rate()(*_columns(q, qd, qdd), parameter_vector(robot)).full().ravel()
+
+
 def friction_forces(robot: Robot, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Friction forces (Eqs. 21–22) on the upper and lower platforms, each (N, 3), N."""
     upper, lower = _model().friction_forces(*_columns(q, qd), parameter_vector(robot))

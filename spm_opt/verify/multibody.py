@@ -44,6 +44,7 @@ import mujoco
 import numpy as np
 
 from spm_opt.model.params import Body, Robot
+from spm_opt.trajectory import Trajectory
 
 ACTIVE_JOINTS = ("theta1", "theta2")
 PASSIVE_JOINTS = ("phi1", "phi2")
@@ -330,3 +331,30 @@ def simulate_open_loop(
         mujoco.mj_step(model, data)
         q[k + 1] = data.qpos[index.qpos_active]
     return t, q
+
+
+def open_loop_deviation(
+    robot: Robot,
+    trajectory: Trajectory,
+    start_s: float = 1.0,
+    duration_s: float = 1.0,
+    torque_scale: float = 1.0,
+    dt: float = 1e-4,
+) -> float:
+    """Largest joint-angle deviation, rad, of an open-loop MuJoCo run from the plan.
+
+    MuJoCo's own inverse-dynamics torques along the plan (sampled every millisecond from
+    ``start_s`` and interpolated by a cubic spline, times ``torque_scale``) are applied from
+    the planned state at ``start_s`` for ``duration_s``. The robot is unstable under
+    gravity, so a small deviation says the torques are right.
+    """
+    from scipy.interpolate import CubicSpline
+
+    t = start_s + np.linspace(0.0, duration_s, int(round(duration_s * 1000)) + 1)
+    q, qd, qdd = trajectory.position(t), trajectory.velocity(t), trajectory.acceleration(t)
+    model = build_model(robot)
+    torque = torque_scale * multibody_inverse_dynamics(robot, q, qd, qdd, model=model)
+    times, simulated = simulate_open_loop(
+        robot, q[0], qd[0], CubicSpline(t - start_s, torque), duration_s, dt=dt, model=model
+    )
+    return float(np.max(np.abs(simulated - trajectory.position(start_s + times))))
