@@ -9,27 +9,13 @@ CasADi face of the same expressions, called once per sample, measured in the sam
 from __future__ import annotations
 
 import argparse
-import json
-import platform
-import time
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
+from timing import ROOT, throughput_table
 
 import spm_opt as so
 from spm_opt.model import kinematics
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def best_of(repeats: int, work) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        work()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:
@@ -70,31 +56,7 @@ def main() -> None:
     grid = len(baseline.time_grid(1000.0))
     rows["evaluate cubic baseline (1 kHz grid)"] = (grid, lambda: so.evaluate(problem, baseline))
 
-    results = {}
-    for name, (count, work) in rows.items():
-        seconds = best_of(args.repeats, work)
-        results[name] = {"samples": count, "seconds": seconds, "samples_per_s": count / seconds}
-    reference = results["forward (CasADi, per sample)"]["samples_per_s"]
-    print(f"{'what':40s} {'samples':>9s} {'best s':>10s} {'samples/s':>12s} {'vs per-sample':>14s}")
-    for name, r in results.items():
-        ratio = r["samples_per_s"] / reference
-        r["ratio_to_casadi_per_sample"] = ratio
-        rate = r["samples_per_s"]
-        print(f"{name:40s} {r['samples']:9d} {r['seconds']:10.4f} {rate:12.3g} {ratio:13.1f}x")
-    out = ROOT / "benchmarks" / "results" / "kinematics.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
-        json.dumps(
-            {
-                "machine": platform.platform(),
-                "python": platform.python_version(),
-                "results": results,
-            },
-            indent=2,
-        )
-        + "\n"
-    )
-    print(f"written {out.relative_to(ROOT)}")
+    throughput_table("kinematics", rows, "forward (CasADi, per sample)", args.repeats)
 
 
 if __name__ == "__main__":

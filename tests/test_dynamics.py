@@ -179,3 +179,19 @@ def test_two_derivations_agree_over_the_papers_trajectory(robot, baseline):
         rtol=0.0,
         atol=1e-9,
     )
+
+
+def test_compiled_torques_equal_casadis_interpreter(robot):
+    rng = np.random.default_rng(3)
+    q, qd, qdd = rng.uniform(-1.0, 1.0, size=(3, 500, 2))
+    parameters = dynamics.parameter_vector(robot)
+    frictionless, _, exact = dynamics._model().torque(q.T, qd.T, qdd.T, parameters)
+    np.testing.assert_allclose(
+        dynamics.inverse_dynamics(robot, q, qd, qdd), (frictionless + exact).full().T, atol=1e-13
+    )
+    # one state broadcast against many rates
+    np.testing.assert_allclose(
+        dynamics.inverse_dynamics(robot, q[0], qd, qdd),
+        dynamics.inverse_dynamics(robot, np.repeat(q[:1], 500, axis=0), qd, qdd),
+        atol=0,
+    )

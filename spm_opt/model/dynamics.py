@@ -6,12 +6,12 @@ Lagrange's equations of the first kind in the redundant coordinates p = (B_x, B_
 actuator torques (Eq. 7). Friction forces on the platforms (Eqs. 20–22) enter the first
 three as generalised forces Q̂_B. Everything is built once as CasADi expressions in which
 the robot's parameters are inputs, so one set of generated functions serves every robot
-and every sweep; the numpy functions below evaluate them over N samples at once.
+and every sweep; the numpy functions below evaluate them over N samples at once (the
+torques compiled to C when a compiler is at hand, :mod:`spm_opt.model.compiled`).
 """
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from functools import cache
 
@@ -19,10 +19,10 @@ import casadi as ca
 import numpy as np
 
 from spm_opt.model import kinematics
+from spm_opt.model.compiled import BatchFunction, compile_batch
 from spm_opt.model.kinematics import Vec, add, cross, scale
 from spm_opt.model.params import Robot
 
-_LOG = logging.getLogger(__name__)
 _BODY_NAMES = ("upper_platform", "lower_platform", "upper_arc", "lower_arc")
 _PARAMETERS = (
     [f"{body}.{item}" for body in _BODY_NAMES for item in ("mass", "com_radius")]
@@ -250,33 +250,19 @@ def _model() -> _Model:
     return _Model(torque, multipliers, energy, friction_forces)
 
 
-def _compiled(function: ca.Function) -> ca.Function:
-    """The function compiled to machine code by the system's C compiler (about 12 times as
-    fast as CasADi's interpreter), or as it is when no compiler is at hand."""
-    inputs = [function.sx_in(i) for i in range(function.n_in())]
-    options = {
-        "jit": True,
-        "compiler": "shell",
-        "cse": True,
-        "jit_options": {"flags": ["-O1"], "verbose": False, "cleanup": True},
-    }
-    try:
-        return ca.Function(
-            function.name(),
-            inputs,
-            function.call(inputs),
-            function.name_in(),
-            function.name_out(),
-            options,
-        )
-    except RuntimeError as error:
-        _LOG.warning("no C compiler for CasADi's JIT (%s); using the interpreter", error)
-        return function
-
-
 @cache
-def _fast_torque() -> ca.Function:
-    return _compiled(_model().torque)
+def _batch_torque() -> BatchFunction | None:
+    return compile_batch(_model().torque)
+
+
+def _torque_parts(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> list[np.ndarray]:
+    """Frictionless, smooth-friction and exact-friction torques, each (N, 2), N·m."""
+    arrays = np.broadcast_arrays(*(np.atleast_2d(np.asarray(a, dtype=float)) for a in (q, qd, qdd)))
+    parameters = parameter_vector(robot)
+    batch = _batch_torque()
+    if batch is None:
+        return [_rows(v) for v in _model().torque(*_columns(*arrays), parameters)]
+    return batch(*arrays, parameters, shared=(3,))
 
 
 def _columns(*arrays: np.ndarray) -> list[np.ndarray]:
@@ -302,21 +288,18 @@ def inverse_dynamics(
     ``friction`` adds the platforms' Coulomb friction (Eqs. 20–22); ``exact`` uses sign(),
     otherwise the smooth sign the optimisers see.
     """
-    arguments = (*_columns(q, qd, qdd), parameter_vector(robot))
-    frictionless, smooth, exact_part = _fast_torque()(*arguments)
-    torque = _rows(frictionless)
+    frictionless, smooth, exact_part = _torque_parts(robot, q, qd, qdd)
     if friction:
-        torque = torque + _rows(exact_part if exact else smooth)
-    return torque
+        return frictionless + (exact_part if exact else smooth)
+    return frictionless
 
 
 def friction_torque(
     robot: Robot, q: np.ndarray, qd: np.ndarray, *, exact: bool = True
 ) -> np.ndarray:
     """The part of the actuator torques (N, 2), N·m, that overcomes friction."""
-    zeros = np.zeros_like(np.atleast_2d(q), dtype=float)
-    _, smooth, exact_part = _fast_torque()(*_columns(q, qd, zeros), parameter_vector(robot))
-    return _rows(exact_part if exact else smooth)
+    _, smooth, exact_part = _torque_parts(robot, q, qd, np.zeros_like(np.atleast_2d(q), float))
+    return exact_part if exact else smooth
 
 
 def gravity_torque(robot: Robot, q: np.ndarray) -> np.ndarray:

@@ -1,0 +1,168 @@
+"""CasADi functions compiled to C and evaluated over many samples in one call.
+
+CasADi's code generator writes the single-sample function; a small C loop around it runs
+it over N samples held in NumPy arrays, split over threads by OpenMP when the compiler has
+it, and ctypes calls that loop on the arrays' own memory (no conversion to CasADi's
+matrices). The shared library is cached on disk under a name made from the hash of its
+source and flags, so a process compiles each function once per machine, not once per run.
+
+Every input and output is a row-major (N, n) float64 array whose row i is sample i's
+vector (an input of shape (n, 1) in CasADi); inputs marked shared are one vector for all
+samples. Without a C compiler :func:`compile_batch` returns ``None`` and callers keep
+CasADi's interpreter.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+_LOG = logging.getLogger(__name__)
+
+FLAGS = ("-O3", "-fPIC", "-shared")
+"""Compiler flags; OpenMP (``-fopenmp``) is added when the compiler accepts it."""
+
+CACHE_ENV = "SPM_OPT_CACHE"
+"""Environment variable naming the cache directory (default ``~/.cache/spm_opt``)."""
+
+_LOOP = """
+#include <stdlib.h>
+int {name}_batch(const double** inputs, const long* strides, double** outputs,
+                 const long* out_strides, long n) {{
+  int failed = 0;
+#ifdef _OPENMP
+#pragma omp parallel reduction(|:failed) if(n >= {parallel_min})
+#endif
+  {{
+    const casadi_real* arg[{sz_arg}];
+    casadi_real* res[{sz_res}];
+    casadi_int iw[{sz_iw} + 1];
+    casadi_real w[{sz_w} + 1];
+#ifdef _OPENMP
+#pragma omp for schedule(static)
+#endif
+    for (long i = 0; i < n; ++i) {{
+      for (int k = 0; k < {n_in}; ++k) arg[k] = inputs[k] + i * strides[k];
+      for (int k = 0; k < {n_out}; ++k) res[k] = outputs[k] + i * out_strides[k];
+      failed |= {name}(arg, res, iw, w, 0);
+    }}
+  }}
+  return failed;
+}}
+"""
+
+PARALLEL_MIN_SAMPLES = 4096
+"""Below this many samples the loop stays on one thread (starting threads costs more)."""
+
+
+@dataclass(frozen=True)
+class BatchFunction:
+    """A compiled CasADi function evaluated over samples; see the module docstring."""
+
+    function: ca.Function
+    library: ctypes.CDLL
+    entry: ctypes._CFuncPtr
+
+    def __call__(self, *inputs: np.ndarray, shared: tuple[int, ...] = ()) -> list[np.ndarray]:
+        """Evaluate over N samples: inputs (N, n_k) except the ``shared`` ones (n_k,);
+        returns the outputs, each (N, m_k)."""
+        f = self.function
+        arrays = [
+            np.ascontiguousarray(np.ravel(a) if k in shared else a, dtype=np.float64)
+            for k, a in enumerate(inputs)
+        ]
+        n = next(a.shape[0] for k, a in enumerate(arrays) if k not in shared)
+        for k, a in enumerate(arrays):
+            expected = (f.size1_in(k),) if k in shared else (n, f.size1_in(k))
+            if a.shape != expected:
+                raise ValueError(f"input {f.name_in(k)} has shape {a.shape}, wanted {expected}")
+        strides = [0 if k in shared else f.size1_in(k) for k in range(f.n_in())]
+        outputs = [np.empty((n, f.size1_out(k))) for k in range(f.n_out())]
+        pointer = ctypes.POINTER(ctypes.c_double)
+        status = self.entry(
+            (pointer * len(arrays))(*(a.ctypes.data_as(pointer) for a in arrays)),
+            (ctypes.c_long * len(strides))(*strides),
+            (pointer * len(outputs))(*(o.ctypes.data_as(pointer) for o in outputs)),
+            (ctypes.c_long * len(outputs))(*(f.size1_out(k) for k in range(f.n_out()))),
+            ctypes.c_long(n),
+        )
+        if status:
+            raise ArithmeticError(f"compiled {f.name()} failed on some samples")
+        return outputs
+
+
+def _source(function: ca.Function) -> str:
+    name = function.name()
+    with tempfile.TemporaryDirectory() as directory:
+        generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        generator.add(function)
+        generator.generate(directory + os.sep)
+        code = Path(directory, f"{name}.c").read_text()
+    return code + _LOOP.format(
+        name=name,
+        sz_arg=function.sz_arg(),
+        sz_res=function.sz_res(),
+        sz_iw=function.sz_iw(),
+        sz_w=function.sz_w(),
+        n_in=function.n_in(),
+        n_out=function.n_out(),
+        parallel_min=PARALLEL_MIN_SAMPLES,
+    )
+
+
+def _compiler() -> str | None:
+    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+
+
+def _cache_directory() -> Path:
+    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "spm_opt")
+
+
+def _build(compiler: str, source: Path, library: Path) -> None:
+    """Compile ``source`` into ``library``, with OpenMP when the compiler takes it."""
+    for extra in (["-fopenmp"], []):
+        partial = library.with_suffix(f".{os.getpid()}.tmp")
+        command = [compiler, *FLAGS, *extra, str(source), "-o", str(partial), "-lm"]
+        if subprocess.run(command, capture_output=True, text=True).returncode == 0:
+            os.replace(partial, library)  # atomic: concurrent builders never see half a file
+            return
+        partial.unlink(missing_ok=True)
+    raise OSError(f"{compiler} could not compile {source}")
+
+
+def compile_batch(function: ca.Function) -> BatchFunction | None:
+    """The function compiled for batches, or None when no C compiler works here."""
+    compiler = _compiler()
+    if compiler is None:
+        _LOG.warning("no C compiler: %s runs in CasADi's interpreter", function.name())
+        return None
+    code = _source(function)
+    key = hashlib.sha256((code + " ".join(FLAGS) + compiler).encode()).hexdigest()[:16]
+    directory = _cache_directory()
+    library = directory / f"{function.name()}_{key}.so"
+    try:
+        if not library.exists():
+            directory.mkdir(parents=True, exist_ok=True)
+            source = directory / f"{function.name()}_{key}.{os.getpid()}.c"
+            source.write_text(code)
+            try:
+                _build(compiler, source, library)
+            finally:
+                source.unlink(missing_ok=True)
+        loaded = ctypes.CDLL(str(library))
+    except OSError as error:
+        _LOG.warning("%s runs in CasADi's interpreter: %s", function.name(), error)
+        return None
+    entry = getattr(loaded, f"{function.name()}_batch")
+    entry.restype = ctypes.c_int
+    return BatchFunction(function, loaded, entry)
