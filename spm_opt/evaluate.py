@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from spm_opt.bounds import duration_lower_bound
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
@@ -47,7 +48,8 @@ class Report:
     ``torque_margin`` is 1 − peak / continuous torque per actuator, ``current_margin`` the
     same for the motor current the actuator's current map gives; ``energy_j`` is
     ∫ Σ|τ·θ̇| dt (the mechanical work the actuators put in, braking counted as work too)
-    and ``effort_n2m2s`` is ∫ τᵀτ dt.
+    and ``effort_n2m2s`` is ∫ τᵀτ dt. ``duration_lower_bound_s`` is the shortest time the
+    limits allow along the contour (:mod:`spm_opt.bounds`).
     """
 
     planner: str | None
@@ -65,6 +67,8 @@ class Report:
     max_landmark_error_mm: float
     min_singularity_margin: float
     contour_length_mm: float
+    duration_lower_bound_s: float
+    duration_over_lower_bound: float
     peak_torque_nm: list[float]
     rms_torque_nm: list[float]
     torque_margin: list[float]
@@ -141,12 +145,14 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     load = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
     torque = robot.actuator.drive_torque(load, qd, qdd)
     continuous_torque = robot.actuator.continuous_torque_nm
+    torque_limit = limits.max_joint_torque or continuous_torque
     peak_torque = np.max(np.abs(torque), axis=0)
     peak_current = np.max(np.abs(robot.actuator.current_map.current(torque)), axis=0)
     duration = t[-1] - t[0]
     mean_speed = float(_time_mean(tool_speed, t))
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
     landmark_errors = _landmark_errors(problem, trajectory, t, directions)
+    lower_bound = duration_lower_bound(problem)
 
     checks = _Checks(t)
     for joint in range(2):
@@ -160,7 +166,7 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
             f"{name} acceleration", np.abs(qdd[:, joint]), limits.max_joint_acceleration, "rad/s^2"
         )
         checks.relative(f"{name} jerk", np.abs(jerk[:, joint]), limits.max_joint_jerk, "rad/s^3")
-        checks.relative(f"{name} torque", np.abs(torque[:, joint]), continuous_torque, "N*m")
+        checks.relative(f"{name} torque", np.abs(torque[:, joint]), torque_limit, "N*m")
     if limits.max_tool_speed is not None:
         checks.relative("tool speed", tool_speed / MM, limits.max_tool_speed / MM, "mm/s")
     if limits.contour_tolerance is not None:
@@ -195,6 +201,8 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
         max_landmark_error_mm=max(v["error_mm"] for v in landmark_errors),
         min_singularity_margin=float(np.min(margins)),
         contour_length_mm=contour.length / MM,
+        duration_lower_bound_s=lower_bound,
+        duration_over_lower_bound=trajectory.duration / lower_bound,
         peak_torque_nm=peak_torque.tolist(),
         rms_torque_nm=np.sqrt(_time_mean(torque**2, t)).tolist(),
         torque_margin=(1.0 - peak_torque / continuous_torque).tolist(),

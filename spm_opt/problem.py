@@ -45,6 +45,8 @@ class Limits:
         Speed of the cut point along the skull.
     contour_tolerance : float or None, m
         Largest allowed distance of the cut point from the planned contour.
+    max_joint_torque : float or None, N·m
+        Largest actuator torque (default in files: the actuator's continuous torque).
     """
 
     max_joint_speed: float
@@ -52,6 +54,7 @@ class Limits:
     max_joint_jerk: float | None = None
     max_tool_speed: float | None = None
     contour_tolerance: float | None = None
+    max_joint_torque: float | None = None
 
 
 @dataclass(frozen=True)
@@ -231,10 +234,19 @@ def _limits(table: Table, robot: Robot) -> Limits:
         )
     tool_speed = table.number("max_tool_speed_mm_s", **positive)
     tolerance = table.number("contour_tolerance_mm", minimum=0.0, default=None)
+    torque = table.number("max_joint_torque_nm", **positive)
+    actuator_torque = robot.actuator.continuous_torque_nm
+    if torque is not None and torque > actuator_torque * (1 + 1e-9):
+        raise table.error(
+            "max_joint_torque_nm",
+            torque,
+            f"expected at most the actuator's continuous torque, {actuator_torque:g} N·m",
+        )
     return Limits(
         max_joint_speed=actuator_speed if speed_rpm is None else speed_rpm * RPM,
         max_joint_acceleration=table.number("max_joint_acceleration_rad_s2", **positive),
         max_joint_jerk=table.number("max_joint_jerk_rad_s3", **positive),
         max_tool_speed=None if tool_speed is None else tool_speed * MM,
         contour_tolerance=None if tolerance is None else tolerance * MM,
+        max_joint_torque=actuator_torque if torque is None else torque,
     )

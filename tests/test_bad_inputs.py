@@ -32,6 +32,7 @@ A1 = "position_mm = [0.0, 0.0, 68.08]"
 A2 = "position_mm = [-22.14, -11.39, 63.10]"
 A3 = "position_mm = [-32.44, 22.58, 60.42]"
 SPEED = "max_joint_speed_rpm = 13.7"
+LIMITS = PROBLEM_TEXT[PROBLEM_TEXT.index("[limits]") :]  # the table, to the end of the file
 THETA1 = "theta1_range_deg = [-60.0, 60.0]"
 
 HEADER = "t,q1,q2,qd1,qd2,qdd1,qdd2\n"
@@ -171,7 +172,7 @@ PLAN_CASES = {
     "string-for-bool": Case(("closed",), problem=(("closed = true", 'closed = "yes"'),)),
     "number-for-table": Case(
         ("problem.toml: limits = 5",),
-        problem=((f"[limits]\n{SPEED}", ""), ("closed = true", "closed = true\nlimits = 5")),
+        problem=((LIMITS, ""), ("closed = true", "closed = true\nlimits = 5")),
     ),
     "nan-position": Case(
         ("landmarks[0].position_mm",), problem=((A1, "position_mm = [0.0, nan, 68.08]"),)

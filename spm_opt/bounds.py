@@ -1,0 +1,44 @@
+"""The shortest time the limits allow along the planned contour: a lower bound for any plan
+that follows it.
+
+At each point of the contour the cut can go no faster than the tool-speed limit, nor faster
+than the speed at which the first joint to reach its speed limit does so: the pace
+(time per length) there is at least max(1 / v_tool, max_i |dθ_i/ds| / ω_max). Integrating the
+pace along the contour gives a bound at least as tight as both "length over the tool-speed
+limit" and "the joint-speed bound integrated along the contour". Accelerations, jerks and
+torques only add time, and a plan inside the contour tolerance can save at most the
+little that cutting a corner within the tolerance saves.
+"""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import numpy as np
+
+from spm_opt.model import kinematics
+from spm_opt.problem import Problem
+
+SAMPLES_PER_SEGMENT = 2001
+
+
+def segment_lower_bounds(problem: Problem, samples: int = SAMPLES_PER_SEGMENT) -> np.ndarray:
+    """Shortest time, s, for each segment between consecutive landmark visits (segments,)."""
+    contour, limits = problem.contour, problem.limits
+    r_u = problem.robot.upper_platform_radius
+    bounds = []
+    for start, end in pairwise(contour.landmark_arc_lengths):
+        s = np.linspace(start, end, samples)
+        points = contour.point_at(s)
+        q = kinematics.inverse_kinematics(kinematics.project_landmarks(points, r_u))
+        joint_pace = np.max(np.abs(np.gradient(q, s, axis=0)), axis=1) / limits.max_joint_speed
+        pace = joint_pace
+        if limits.max_tool_speed is not None:
+            pace = np.maximum(pace, 1.0 / limits.max_tool_speed)
+        bounds.append(np.trapezoid(pace, s))
+    return np.array(bounds)
+
+
+def duration_lower_bound(problem: Problem) -> float:
+    """Shortest time, s, in which the limits allow the whole cut along the contour."""
+    return float(np.sum(segment_lower_bounds(problem)))

@@ -1,0 +1,100 @@
+"""The optimal-control planners: plans the evaluator finds within every limit, and clear
+errors for limits no plan can meet."""
+
+import dataclasses
+
+import pytest
+
+import spm_opt as so
+from spm_opt.model.params import MM
+from spm_opt.planners import get_planner
+
+
+def with_limits(problem, **limits):
+    return dataclasses.replace(problem, limits=dataclasses.replace(problem.limits, **limits))
+
+
+@pytest.fixture(scope="module")
+def min_time(paper_problem):
+    return so.plan(paper_problem, "ocp-min-time")
+
+
+def test_min_time_meets_every_limit_on_the_contour(paper_problem, min_time):
+    report = so.evaluate(paper_problem, min_time)
+    assert report.violations == []
+    assert report.max_contour_deviation_mm <= 0.1 + 0.01
+    assert report.max_landmark_error_mm < 0.01
+    assert min_time.metadata["statistics"]["status"] == "Solve_Succeeded"
+
+
+def test_min_time_is_near_the_lower_bound(paper_problem, min_time):
+    """The limits allow no faster cut along the contour than the bound, and the plan keeps
+    a 2 % reserve on each limit: it cannot be below 1, nor far above 1 / 0.98."""
+    ratio = so.evaluate(paper_problem, min_time).duration_over_lower_bound
+    assert 1.0 < ratio < 1.04
+
+
+def test_plan_records_solver_statistics(min_time):
+    statistics = min_time.metadata["statistics"]
+    for key in ("status", "iterations", "solve_time_s", "constraint_violation", "most_binding"):
+        assert key in statistics
+    assert statistics["constraint_violation"] < 1e-6
+    assert len(min_time.metadata["landmark_times_s"]) == 5
+
+
+def test_warm_start_from_a_solved_plan(paper_problem, min_time):
+    """Seeded with its own solution, the planner keeps (or improves) it."""
+    again = get_planner("ocp-min-time").plan(paper_problem, warm_start=min_time)
+    assert again.duration <= min_time.duration * (1 + 1e-3)
+    assert so.evaluate(paper_problem, again).violations == []
+
+
+def test_tool_speed_too_low_for_the_total_duration(paper_problem):
+    problem = with_limits(paper_problem, max_tool_speed=1.0 * MM)
+    with pytest.raises(so.PlanningError, match=r"cut lasts 40 s .* need at least 11\d\.\d+ s"):
+        so.plan(problem, "ocp-min-jerk")
+
+
+def test_torque_limit_below_the_gravity_load(paper_problem):
+    """Starting at rest at A2, where gravity loads both actuators by about 0.1 N·m."""
+    problem = dataclasses.replace(
+        paper_problem,
+        landmark_names=paper_problem.landmark_names[1:],
+        landmarks=paper_problem.landmarks[1:],
+        closed=False,
+        segment_durations=[15.0, 15.0],
+    )
+    problem = with_limits(problem, max_joint_torque=0.05)
+    with pytest.raises(so.PlanningError, match=r"holding the robot at rest at A2 takes 0.118"):
+        so.plan(problem, "ocp-min-time")
+
+
+def test_zero_contour_tolerance(paper_problem):
+    problem = with_limits(paper_problem, contour_tolerance=0.0)
+    with pytest.raises(so.PlanningError, match=r"contour_tolerance_mm = 0: .*turn every corner"):
+        so.plan(problem, "ocp-min-time")
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"nodes_per_phase": 0}, r"planner.ocp-min-time.nodes_per_phase = 0: expected an integer"),
+        ({"margin": "big"}, r"planner.ocp-min-time.margin = 'big': expected a number"),
+        ({"timing": "fast"}, r"planner.ocp-min-time.timing = 'fast': expected one of free"),
+        ({"colour": 1}, r"planner.ocp-min-time.colour: unknown key"),
+    ],
+)
+def test_bad_settings_are_one_line_errors(paper_problem, options, message):
+    problem = dataclasses.replace(paper_problem, planner_options={"ocp-min-time": options})
+    with pytest.raises(so.InputError, match=message):
+        so.plan(problem, "ocp-min-time")
+
+
+@pytest.mark.slow
+def test_min_energy_beats_the_baseline_on_its_own_objective(paper_problem, baseline):
+    """At the paper's 40 s, inside every limit the baseline breaks, with less ∫τᵀτ dt."""
+    plan = so.plan(paper_problem, "ocp-min-energy")
+    report = so.evaluate(paper_problem, plan)
+    assert report.violations == []
+    assert report.duration_s == pytest.approx(40.0)
+    assert report.effort_n2m2s < 0.8 * so.evaluate(paper_problem, baseline).effort_n2m2s
