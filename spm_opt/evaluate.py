@@ -145,7 +145,7 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     load = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
     torque = robot.actuator.drive_torque(load, qd, qdd)
     continuous_torque = robot.actuator.continuous_torque_nm
-    torque_limit = limits.max_joint_torque or continuous_torque
+    torque_limit = problem.max_joint_torque
     peak_torque = np.max(np.abs(torque), axis=0)
     peak_current = np.max(np.abs(robot.actuator.current_map.current(torque)), axis=0)
     duration = t[-1] - t[0]

@@ -143,6 +143,11 @@ class Problem:
         self.robot.check_reachable(self.platform_points, list(names))
 
     @property
+    def max_joint_torque(self) -> float:
+        """The torque limit, N·m: the problem's, else the actuator's continuous torque."""
+        return self.limits.max_joint_torque or self.robot.actuator.continuous_torque_nm
+
+    @property
     def visit_order(self) -> list[int]:
         """Landmark indices in the order the cut visits them (the first again if closed)."""
         return list(range(len(self.landmarks))) + ([0] if self.closed else [])

@@ -55,7 +55,7 @@ UNLIMITED = 1e3
 """Stands in for a limit the problem leaves open (in the limit's SI unit)."""
 MIN_CONTOUR_TOLERANCE = 1e-6
 """Narrowest contour tube the planners accept, m: a zero-width tube has no interior."""
-_ARC_PARAMETERS = 19  # q_start (2), q_end (2), a, w, n, w_end (3 each), ρ0, ρ', sweep
+_ARC_PARAMETERS = 14  # a, w, n, w_end (3 each), ρ0 (mm), ρ' (mm/rad)
 
 
 @dataclass(frozen=True)
@@ -194,22 +194,36 @@ class _Grid:
         """Times (M + 1,), s, of the nodes from the start."""
         return np.concatenate([[0.0], np.cumsum(self.interval_matrix @ phase_durations)])
 
+    def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The NLP's x as node states (M + 1, 6) = (q, q̇, q̈), jerks (M, 2) and phase
+        durations (D,); x stacks them in that order."""
+        n_states, n_jerks = 6 * (self.intervals + 1), 2 * self.intervals
+        return (
+            np.reshape(x[:n_states], (-1, 6)),
+            np.reshape(x[n_states : n_states + n_jerks], (-1, 2)),
+            x[n_states + n_jerks :],
+        )
+
+    def trajectory(self, x: np.ndarray, metadata: dict[str, Any]) -> Trajectory:
+        """The motion x describes: exact, since each interval is a cubic in time."""
+        states, _, durations = self.split(x)
+        t = self.node_times(durations)
+        return Trajectory.from_samples(
+            t, states[:, 0:2], states[:, 2:4], states[:, 4:6], metadata=metadata
+        )
+
 
 @dataclass(frozen=True)
 class _Layout:
-    """Where things sit in the NLP's vectors."""
+    """Where things sit in the NLP: the grid (x) and the constraint groups (g)."""
 
     grid: _Grid
-    states: slice  # 6 × (M + 1), column-major: (q, q̇, q̈) per node
-    jerks: slice  # 2 × M
-    durations: slice  # the D phase durations
     groups: tuple[tuple[str, int, int, int], ...]  # (name, start, rows per point, points)
 
-    def state(self, x: np.ndarray) -> np.ndarray:
-        return np.reshape(x[self.states], (-1, 6))
 
-    def jerk(self, x: np.ndarray) -> np.ndarray:
-        return np.reshape(x[self.jerks], (-1, 2))
+def _grid(segments: int, settings: OcpSettings) -> _Grid:
+    corner = settings.corner_nodes
+    return _Grid(segments, (corner, settings.nodes_per_phase, corner))
 
 
 PATH_ROWS = ("tool speed", "contour deviation", "segment start", "segment end")
@@ -221,8 +235,8 @@ def _path_function() -> ca.Function:
     """(q, q̇, arc) -> tool speed² (mm²/s²), chord² off the arc (mm²), and the two wedge
     conditions that keep the cut between the segment's end landmarks (≥ 0), at one point."""
     q, qd, arc = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("arc", _ARC_PARAMETERS)
-    a, w, n, w_end = (arc[4 + 3 * k : 7 + 3 * k] for k in range(4))
-    rho0, slope = arc[16], arc[17]
+    a, w, n, w_end = (arc[3 * k : 3 * k + 3] for k in range(4))
+    rho0, slope = arc[12], arc[13]
     p = ca.vertcat(*kinematics.direction(q[0], q[1]))
     d1, d2 = kinematics.direction_jacobian(q[0], q[1])
     p_dot = ca.vertcat(*d1) * qd[0] + ca.vertcat(*d2) * qd[1]
@@ -270,8 +284,7 @@ def _nlp(
     Constraints are imposed at the M + 1 nodes and the M interval midpoints; p holds the
     arc of every node and midpoint (one column each), the robot, the weights and scales.
     """
-    corner = settings.corner_nodes
-    grid = _Grid(segments, (corner, settings.nodes_per_phase, corner))
+    grid = _grid(segments, settings)
     m = grid.intervals
     states, jerks = ca.MX.sym("x", 6, m + 1), ca.MX.sym("u", 2, m)
     durations = ca.MX.sym("T", 3 * segments)
@@ -324,14 +337,7 @@ def _nlp(
         start += value.numel()
     x = ca.vertcat(ca.vec(states), ca.vec(jerks), durations)
     parameters = ca.vertcat(ca.vec(node_arcs), ca.vec(mid_arcs), robot, weights, scales)
-    n_states, n_jerks = states.numel(), jerks.numel()
-    layout = _Layout(
-        grid=grid,
-        states=slice(0, n_states),
-        jerks=slice(n_states, n_states + n_jerks),
-        durations=slice(n_states + n_jerks, n_states + n_jerks + 3 * segments),
-        groups=tuple(groups),
-    )
+    layout = _Layout(grid=grid, groups=tuple(groups))
     options = {
         "ipopt": {
             "max_iter": settings.max_iterations,
@@ -348,23 +354,20 @@ def _nlp(
 
 
 def _arcs(problem: Problem) -> np.ndarray:
-    """Per segment (segments, 19): landmark angles at both ends, then the arc's a, w, n,
-    n × end, ρ0 (mm), ρ' (mm/rad), sweep (the great circle the cut follows, as the Contour
-    has it). Lengths in mm keep the squared rows of the path constraints near 1."""
-    contour, angles = problem.contour, problem.waypoint_angles
+    """Per segment (segments, 14): the arc's a, w, n, n × end, ρ0 (mm), ρ' (mm/rad) (the
+    great circle the cut follows, as the Contour has it). Lengths in mm keep the squared
+    rows of the path constraints near 1."""
+    contour = problem.contour
     sweep = contour.sweep[:, None]
     end = contour.start * np.cos(sweep) + contour.inplane * np.sin(sweep)
     return np.concatenate(
         [
-            angles[:-1],
-            angles[1:],
             contour.start,
             contour.inplane,
             contour.normal,
             np.cross(contour.normal, end),
             contour.start_radius[:, None] / MM,
             contour.radius_slope[:, None] / MM,
-            sweep,
         ],
         axis=1,
     )
@@ -415,7 +418,7 @@ def _check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.n
             f"contour_tolerance_mm = {limits.contour_tolerance / MM:g}: the cut would have to "
             f"turn every corner exactly; give at least {MIN_CONTOUR_TOLERANCE / MM:g} mm"
         )
-    torque_limit = limits.max_joint_torque or problem.robot.actuator.continuous_torque_nm
+    torque_limit = problem.max_joint_torque
     for visit in (0, len(names) - 1):
         holding = dynamics.gravity_torque(problem.robot, problem.waypoint_angles[visit])[0]
         if np.max(np.abs(holding)) > torque_limit * (1 - margin):
@@ -477,7 +480,7 @@ def _bounds(
     elif settings.timing == "total":
         total = (np.sum(problem.segment_durations),) * 2
 
-    torque = (limits.max_joint_torque or robot.actuator.continuous_torque_nm) * keep
+    torque = problem.max_joint_torque * keep
     tool = (limits.max_tool_speed or UNLIMITED) * keep / MM
     tolerance = (limits.contour_tolerance or UNLIMITED) * keep / MM
     path_low = np.array([-np.inf, -np.inf, 0.0, 0.0])
@@ -583,17 +586,24 @@ class OcpPlanner:
             "total": need * np.sum(problem.segment_durations) / np.sum(need),
             "free": 1.3 * need,
         }[settings.timing]
-        grid = _nlp(len(durations), settings, False)[2].grid
+        grid = _grid(len(durations), settings)
         x0 = _guess(problem, grid, durations, warm_start)
         with_torque = settings.energy_weight > 0.0
         x, statistics = self._solve(problem, settings, with_torque, x0)
-        if not with_torque and self._torque_exceeded(problem, settings, x):
+        if not with_torque and _torque_exceeded(problem, grid, settings.margin, x):
             x, again = self._solve(problem, settings, True, x)
             again["solve_time_s"] += statistics["solve_time_s"]
             again["iterations"] += statistics["iterations"]
             statistics = again
         statistics["settings"] = dataclasses.asdict(settings)
-        return self._trajectory(problem, settings, x, statistics)
+        _, _, durations = grid.split(x)
+        landmark_times = grid.node_times(durations)[grid.landmark_nodes]
+        metadata = {
+            "landmark_times_s": landmark_times.tolist(),
+            "landmarks": problem.visit_names,
+            "statistics": statistics,
+        }
+        return grid.trajectory(x, metadata)
 
     def _solve(
         self,
@@ -610,7 +620,7 @@ class OcpPlanner:
         at_guess = terms(x0, _parameters(problem, layout, weights, scales))
         scales = np.maximum(np.abs([float(v) for v in at_guess]), 1e-9)
         parameters = _parameters(problem, layout, weights, scales)
-        bounds = _bounds(problem, layout, settings, x0[layout.durations])
+        bounds = _bounds(problem, layout, settings, layout.grid.split(x0)[2])
         started = time.perf_counter()
         solution = solver(x0=x0, p=parameters, **bounds)
         wall = time.perf_counter() - started
@@ -638,42 +648,16 @@ class OcpPlanner:
             "jerk_integral_rad2_s5": jerk_integral,
         }
 
-    @staticmethod
-    def _torque_exceeded(problem: Problem, settings: OcpSettings, x: np.ndarray) -> bool:
-        """Whether the model's torques (smooth friction) at the nodes and midpoints of the
-        solution exceed the torque limit less the margin."""
-        layout = _nlp(len(problem.segment_durations), settings, False)[2]
-        states, jerks = layout.state(x), layout.jerk(x)
-        h = (layout.grid.interval_matrix @ x[layout.durations])[:, None] / 2
-        q, qd, qdd = states[:-1, 0:2], states[:-1, 2:4], states[:-1, 4:6]
-        middle = (
-            q + h * qd + h**2 / 2 * qdd + h**3 / 6 * jerks,
-            qd + h * qdd + h**2 / 2 * jerks,
-            qdd + h * jerks,
-        )
-        points = [np.vstack([states[:, 2 * k : 2 * k + 2], middle[k]]) for k in range(3)]
-        torque = dynamics.inverse_dynamics(problem.robot, *points, exact=False)
-        limit = problem.limits.max_joint_torque or problem.robot.actuator.continuous_torque_nm
-        return bool(np.max(np.abs(torque)) > limit * (1.0 - settings.margin))
 
-    @staticmethod
-    def _trajectory(
-        problem: Problem, settings: OcpSettings, x: np.ndarray, statistics: dict[str, Any]
-    ) -> Trajectory:
-        layout = _nlp(len(problem.segment_durations), settings, False)[2]
-        states, grid = layout.state(x), layout.grid
-        t = grid.node_times(x[layout.durations])
-        return Trajectory.from_samples(
-            t,
-            states[:, 0:2],
-            states[:, 2:4],
-            states[:, 4:6],
-            metadata={
-                "landmark_times_s": t[grid.landmark_nodes].tolist(),
-                "landmarks": problem.visit_names,
-                "statistics": statistics,
-            },
-        )
+def _torque_exceeded(problem: Problem, grid: _Grid, margin: float, x: np.ndarray) -> bool:
+    """Whether the model's torques (smooth friction) at the nodes and midpoints of x exceed
+    the torque limit less the margin."""
+    motion = grid.trajectory(x, {})
+    nodes = grid.node_times(grid.split(x)[2])
+    t = np.concatenate([nodes, (nodes[:-1] + nodes[1:]) / 2])
+    state = (motion.position(t), motion.velocity(t), motion.acceleration(t))
+    torque = dynamics.inverse_dynamics(problem.robot, *state, exact=False)
+    return bool(np.max(np.abs(torque)) > problem.max_joint_torque * (1.0 - margin))
 
 
 MIN_TIME = register(
