@@ -49,7 +49,10 @@ class Report:
     same for the motor current the actuator's current map gives; ``energy_j`` is
     ∫ Σ|τ·θ̇| dt (the mechanical work the actuators put in, braking counted as work too)
     and ``effort_n2m2s`` is ∫ τᵀτ dt. ``duration_lower_bound_s`` is the shortest time the
-    limits allow along the contour (:mod:`spm_opt.bounds`).
+    limits allow along the contour (:mod:`spm_opt.bounds`). ``max_acceleration_step_rad_s2``
+    is the largest jump of q̈ (from rest at the start, to rest at the end, or between
+    pieces): an unbounded jerk that the polynomials' own jerk does not show; with a jerk
+    limit, a step larger than what that jerk reaches in one grid interval is a violation.
     """
 
     planner: str | None
@@ -58,6 +61,7 @@ class Report:
     joint_speed_limit_rad_s: float
     peak_joint_acceleration_rad_s2: list[float]
     rms_jerk_rad_s3: list[float]
+    max_acceleration_step_rad_s2: list[float]
     max_contour_deviation_mm: float
     rms_contour_deviation_mm: float
     max_tool_speed_mm_s: float
@@ -153,6 +157,7 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
     landmark_errors = _landmark_errors(problem, trajectory, t, directions)
     lower_bound = duration_lower_bound(problem)
+    step_times, steps = trajectory.acceleration_steps()
 
     checks = _Checks(t)
     for joint in range(2):
@@ -166,6 +171,11 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
             f"{name} acceleration", np.abs(qdd[:, joint]), limits.max_joint_acceleration, "rad/s^2"
         )
         checks.relative(f"{name} jerk", np.abs(jerk[:, joint]), limits.max_joint_jerk, "rad/s^3")
+        if limits.max_joint_jerk is not None:
+            allowed = limits.max_joint_jerk / rate_hz
+            step = np.abs(steps[:, joint])
+            slack = RELATIVE_TOLERANCE * allowed
+            checks.above(f"{name} acceleration step", step, allowed, slack, "rad/s^2", step_times)
         checks.relative(f"{name} torque", np.abs(torque[:, joint]), torque_limit, "N*m")
     if limits.max_tool_speed is not None:
         checks.relative("tool speed", tool_speed / MM, limits.max_tool_speed / MM, "mm/s")
@@ -192,6 +202,7 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
         joint_speed_limit_rad_s=limits.max_joint_speed,
         peak_joint_acceleration_rad_s2=np.max(np.abs(qdd), axis=0).tolist(),
         rms_jerk_rad_s3=np.sqrt(_time_mean(jerk**2, t)).tolist(),
+        max_acceleration_step_rad_s2=np.max(np.abs(steps), axis=0).tolist(),
         max_contour_deviation_mm=float(np.max(deviation) / MM),
         rms_contour_deviation_mm=float(np.sqrt(_time_mean(deviation**2, t)) / MM),
         max_tool_speed_mm_s=float(np.max(tool_speed) / MM),
@@ -222,12 +233,20 @@ class _Checks:
         self.found: list[Violation] = []
 
     def above(
-        self, limit: str, values: np.ndarray, allowed: float, slack: float, unit: str
+        self,
+        limit: str,
+        values: np.ndarray,
+        allowed: float,
+        slack: float,
+        unit: str,
+        times: np.ndarray | None = None,
     ) -> None:
+        """Record the worst of ``values`` (at ``times``, default the grid) above the limit."""
+        times = self.t if times is None else times
         worst = int(np.argmax(values))
         if values[worst] > allowed + slack:
             self.found.append(
-                Violation(limit, float(values[worst]), float(allowed), unit, float(self.t[worst]))
+                Violation(limit, float(values[worst]), float(allowed), unit, float(times[worst]))
             )
 
     def below(

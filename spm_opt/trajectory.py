@@ -33,6 +33,8 @@ MAX_DURATION_S = 86_400.0
 """Longest trajectory a CSV file may hold, s (a day)."""
 DEFAULT_RATE_HZ = 100.0
 _SAME_TIME_S = 1e-9
+_SIDE_STEP_S = 1e-9
+"""Relative offset, s per s, of the one-sided limits at a breakpoint."""
 
 
 def package_version() -> str:
@@ -77,11 +79,22 @@ class Trajectory:
         qdd: np.ndarray,
         metadata: dict[str, Any] | None = None,
     ) -> Trajectory:
-        """Quintic Hermite pieces through samples: t (N,), s; q, qd, qdd (N, 2), SI."""
+        """Quintic Hermite pieces through samples: t (N,), s; q, qd, qdd (N, 2), SI.
+
+        Each piece's Bernstein coefficients follow from q, q̇, q̈ at its two ends in closed
+        form (what ``BPoly.from_derivatives`` computes, without its Python loop per piece).
+        """
         t, q, qd, qdd = (np.asarray(a, dtype=float) for a in (t, q, qd, qdd))
-        derivatives = np.stack([q, qd, qdd], axis=1)  # (N, 3, 2)
-        positions = BPoly.from_derivatives(t, derivatives)
-        return cls(positions, metadata, samples=(t, q, qd, qdd))
+        h = np.diff(t)[:, None]
+        coefficients = [
+            q[:-1],
+            q[:-1] + h * qd[:-1] / 5.0,
+            q[:-1] + 2.0 * h * qd[:-1] / 5.0 + h**2 * qdd[:-1] / 20.0,
+            q[1:] - 2.0 * h * qd[1:] / 5.0 + h**2 * qdd[1:] / 20.0,
+            q[1:] - h * qd[1:] / 5.0,
+            q[1:],
+        ]
+        return cls(BPoly(np.stack(coefficients), t), metadata, samples=(t, q, qd, qdd))
 
     @property
     def start_time(self) -> float:
@@ -131,6 +144,22 @@ class Trajectory:
     def jerk(self, t: np.ndarray | float) -> np.ndarray:
         """Third derivative of q(t), shape (N, 2), rad/s³ (one-sided at breakpoints)."""
         return self._derivative(2, t)
+
+    def acceleration_steps(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where q̈ jumps: times (K,), s, and steps (K, 2), rad/s², at the start (from rest),
+        at every inner breakpoint (right minus left limit) and at the end (to rest)."""
+        inner = self.breakpoints[1:-1]
+        side = _SIDE_STEP_S * np.maximum(1.0, np.abs(inner))[:, None]
+        left = self._derivatives[1](inner - side[:, 0])
+        right = self._derivatives[1](inner + side[:, 0])
+        steps = np.vstack(
+            [
+                self.acceleration([self.start_time]),
+                np.reshape(right - left, (-1, 2)),
+                -self.acceleration([self.end_time]),
+            ]
+        )
+        return np.concatenate([[self.start_time], inner, [self.end_time]]), steps
 
     def _derivative(self, index: int, t: np.ndarray | float) -> np.ndarray:
         t = np.asarray(t, dtype=float)

@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.interpolate import PPoly
 
 import spm_opt as so
 from spm_opt.model import kinematics
@@ -75,9 +76,18 @@ def test_baseline_report(paper_problem, baseline):
     data = report.to_dict()
     assert REQUIRED_KEYS <= set(data)
     assert data["duration_s"] == 40.0
-    # the paper's problem limits the tool speed to 3 mm/s and the cut to 0.1 mm from the
-    # contour; the baseline meets neither
-    assert [v["limit"] for v in data["violations"]] == ["tool speed", "contour deviation"]
+    # the paper's problem limits the tool speed to 3 mm/s, the cut to 0.1 mm from the
+    # contour and the jerk to 10 rad/s³; the baseline meets none: its cubics start from rest
+    # with a step in acceleration (2b and 2f of Table III's first segment)
+    assert [v["limit"] for v in data["violations"]] == [
+        "theta1 acceleration step",
+        "theta2 acceleration step",
+        "tool speed",
+        "contour deviation",
+    ]
+    start = baseline.local_coefficients()[1, 0] * 2  # q̈(0) = 2 × the t² coefficient
+    assert report.max_acceleration_step_rad_s2 == pytest.approx(np.abs(start), rel=1e-9)
+    assert data["violations"][0]["time_s"] == 0.0
     assert report.max_landmark_error_mm < 1e-9
     assert 6.5 < report.max_contour_deviation_mm < 7.5  # model notes: "up to about 7 mm"
     assert 3.5 < report.max_tool_speed_mm_s < 4.5  # "from 0 to about 4 mm/s"
@@ -137,9 +147,31 @@ def test_each_limit_is_checked(paper_problem, baseline, limits, limit_name):
     assert 0.0 <= violation.time_s <= 40.0
 
 
+def test_acceleration_steps_between_pieces_are_found(paper_problem):
+    """θ1 on two quadratic pieces with q̈ = 0.02 then 0.05 rad/s² (q̇ continuous at 1 s):
+    no jerk inside the pieces, but steps of 0.02, 0.03 and −0.05 rad/s² at 0, 1 and 2 s."""
+    coefficients = np.zeros((3, 2, 2))
+    coefficients[0, :, 0] = [0.01, 0.025]
+    coefficients[1, 1, 0] = 0.02
+    coefficients[2, 1, 0] = 0.01
+    trajectory = so.Trajectory(PPoly(coefficients, np.array([0.0, 1.0, 2.0])))
+    times, steps = trajectory.acceleration_steps()
+    assert times.tolist() == [0.0, 1.0, 2.0]
+    assert steps[:, 0] == pytest.approx([0.02, 0.03, -0.05], abs=1e-9)
+    assert steps[:, 1] == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
+    report = so.evaluate(paper_problem, trajectory)  # jerk limit 10 rad/s³ at 1 kHz
+    assert report.rms_jerk_rad_s3[0] == pytest.approx(0.0, abs=1e-9)
+    assert report.max_acceleration_step_rad_s2[0] == pytest.approx(0.05, abs=1e-9)
+    step = next(v for v in report.violations if v.limit == "theta1 acceleration step")
+    assert (step.worst, step.allowed, step.time_s) == pytest.approx((0.05, 0.01, 2.0))
+    assert "theta2 acceleration step" not in [v.limit for v in report.violations]
+
+
 def test_within_half_a_percent_is_not_a_violation(paper_problem, baseline):
     peak = max(so.evaluate(paper_problem, baseline).peak_joint_speed_rad_s)
-    loose = dataclasses.replace(paper_problem.limits, max_tool_speed=None, contour_tolerance=None)
+    loose = dataclasses.replace(
+        paper_problem.limits, max_tool_speed=None, contour_tolerance=None, max_joint_jerk=None
+    )
     paper_problem = dataclasses.replace(paper_problem, limits=loose)
     limits = dataclasses.replace(paper_problem.limits, max_joint_speed=peak / 1.004)
     report = so.evaluate(dataclasses.replace(paper_problem, limits=limits), baseline)

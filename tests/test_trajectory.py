@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy.interpolate import BPoly
 
 import spm_opt as so
 from spm_opt.trajectory import COLUMNS
@@ -88,3 +89,15 @@ def test_failed_write_leaves_nothing(tmp_path, baseline):
     with pytest.raises(OSError):
         baseline.to_csv(tmp_path / "plan.csv")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.json"]
+
+
+def test_quintic_pieces_are_scipys_hermite_interpolant():
+    """The closed-form pieces of from_samples against scipy's BPoly.from_derivatives."""
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(1e-3, 0.5, size=40))
+    q, qd, qdd = rng.normal(size=(3, 40, 2))
+    ours = so.Trajectory.from_samples(t, q, qd, qdd)
+    scipys = BPoly.from_derivatives(t, np.stack([q, qd, qdd], axis=1))
+    grid = np.linspace(t[0], t[-1], 5001)
+    np.testing.assert_allclose(ours.position(grid), scipys(grid), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(ours.jerk(grid), scipys(grid, 3), rtol=1e-7, atol=1e-6)
