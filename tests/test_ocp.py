@@ -2,12 +2,15 @@
 errors for limits no plan can meet."""
 
 import dataclasses
+from pathlib import Path
 
 import pytest
 
 import spm_opt as so
 from spm_opt.model.params import MM
 from spm_opt.planners import get_planner
+
+PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 
 
 def with_limits(problem, **limits):
@@ -28,10 +31,11 @@ def test_min_time_meets_every_limit_on_the_contour(paper_problem, min_time):
 
 
 def test_min_time_is_near_the_lower_bound(paper_problem, min_time):
-    """The limits allow no faster cut along the contour than the bound, and the plan keeps
-    a 2 % reserve on each limit: it cannot be below 1, nor far above 1 / 0.98."""
+    """The limits allow no faster cut along the contour than the bound (cutting corners
+    inside the 0.1 mm tube saves far less than the plan's 0.5 % reserve on each limit):
+    within 2 % of it."""
     ratio = so.evaluate(paper_problem, min_time).duration_over_lower_bound
-    assert 1.0 < ratio < 1.04
+    assert 1.0 < ratio < 1.02
 
 
 def test_plan_records_solver_statistics(min_time):
@@ -90,11 +94,44 @@ def test_bad_settings_are_one_line_errors(paper_problem, options, message):
         so.plan(problem, "ocp-min-time")
 
 
+@pytest.mark.parametrize("name", ["craniotomy_large_flap", "craniotomy_five_landmarks"])
+def test_min_time_on_other_flaps(name):
+    problem = so.load_problem(PROBLEMS / f"{name}.toml")
+    report = so.evaluate(problem, so.plan(problem, "ocp-min-time"))
+    assert report.violations == []
+    assert report.max_landmark_error_mm < 0.01
+    assert 1.0 < report.duration_over_lower_bound < 1.02
+
+
+def jerk_integral(report):
+    """∫ jerkᵀjerk dt, rad²/s⁵, from the evaluator's RMS jerks."""
+    return sum(rms**2 for rms in report.rms_jerk_rad_s3) * report.duration_s
+
+
+@pytest.fixture(scope="module")
+def min_energy(paper_problem):
+    return so.plan(paper_problem, "ocp-min-energy")
+
+
 @pytest.mark.slow
-def test_min_energy_beats_the_baseline_on_its_own_objective(paper_problem, baseline):
+def test_min_energy_beats_the_baseline_on_its_own_objective(paper_problem, baseline, min_energy):
     """At the paper's 40 s, inside every limit the baseline breaks, with less ∫τᵀτ dt."""
-    plan = so.plan(paper_problem, "ocp-min-energy")
-    report = so.evaluate(paper_problem, plan)
+    report = so.evaluate(paper_problem, min_energy)
     assert report.violations == []
     assert report.duration_s == pytest.approx(40.0)
     assert report.effort_n2m2s < 0.8 * so.evaluate(paper_problem, baseline).effort_n2m2s
+
+
+@pytest.mark.slow
+def test_min_jerk_is_the_smoothest_plan_within_the_limits(paper_problem, min_energy):
+    """At the paper's 40 s and inside every limit, less ∫jerk² dt than the minimum-energy
+    plan of the same problem. (The cubic baseline's ∫jerk² is smaller only because it
+    leaves the 0.1 mm tube by 7 mm and starts and ends with steps in acceleration, which
+    the evaluator reports as violations.)"""
+    plan = so.plan(paper_problem, "ocp-min-jerk")
+    report = so.evaluate(paper_problem, plan)
+    assert report.violations == []
+    assert report.duration_s == pytest.approx(40.0)
+    assert report.max_landmark_error_mm < 0.01
+    other = so.evaluate(paper_problem, min_energy)
+    assert jerk_integral(report) < 0.5 * jerk_integral(other)
