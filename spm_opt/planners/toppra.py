@@ -1,0 +1,620 @@
+"""Time-optimal motion along the planned contour (toppra), made jerk-limited.
+
+Path. The contour has a corner at every landmark, so the cut stops there: each segment
+between consecutive landmark visits is its own path, from rest to rest, and the segments are
+chained. Along a segment the cut point's arc length s (mm, from the segment's first
+landmark) parameterises the joint angles q(s): a cubic spline through the inverse kinematics
+of ``path_samples`` points of the great-circle arc, exact at the landmarks. q varies on the
+scale of the skull's radius (~70 mm), so 100 samples keep it within 1e-8 mm of the arc.
+
+Limits, as toppra's linear constraints in the path acceleration u = s̈ and x = ṡ², at
+``gridpoints`` points per segment (spaced as s ∝ ξ² at the ends, where the cut starts and
+stops) and, by toppra's interpolation scheme, again at the next gridpoint:
+
+- joint speed |q'| ṡ ≤ ω and tool speed k(s) ṡ ≤ v, with k the cut point's speed per unit
+  ṡ as the contour measures it (ρ|ṗ| and ρ' φ̇): bounds on x;
+- joint acceleration q̈ = q' u + q'' x within ±a;
+- actuator torque from the one model, τ = (M + J)(q' u + q'' x) + h(q, q') x + g(q) + f:
+  M the mass matrix, J the reflected rotor inertia, h(q, q') x the Coriolis and centrifugal
+  torque (quadratic in q̇ = q' ṡ), g gravity with the payload, f the platforms' friction.
+  The model's friction has a weight-only normal force and the sign of the sliding velocity,
+  so for ṡ > 0 it does not depend on ṡ: f(q, q' ṡ) = f(q, q') is a constant per gridpoint,
+  exact in toppra's form. Only where the sliding direction reverses between gridpoints is it
+  bounded: each gridpoint's bound allows every friction value of it and its neighbours (and
+  0, at rest, at the ends). A gear efficiency η < 1 costs at most 1/η, so |τ| ≤ η τ_max.
+
+toppra works in σ = s / ℓ, ℓ the largest speed allowed (mm per s), so that σ̇ ≤ 1: with
+ṡ² up to 1e4 mm²/s² its LP solver fails on the finest gridpoints.
+
+Jerk. toppra's s̈ is constant between gridpoints; its steps would be steps of the joint
+acceleration. Its ṡ(t), piecewise linear, is resampled on a uniform grid of ``time_step_s``
+(each step's s̈ the mean of toppra's over it), then s(t) is replaced by its moving average
+over a window T_w of whole steps. Then ṡ and s̈ are window averages of feasible ones,
+s⃛ = (s̈(t) − s̈(t − T_w)) / T_w is bounded by the largest change of s̈ within a window over
+T_w, the motion stays monotone, starts and ends at rest with zero acceleration, and lasts
+T_w longer. T_w starts at a / j and is rescaled by the peak joint jerk of the averaged
+motion, q⃛ = q' s⃛ + 3 q'' ṡ s̈ + q''' ṡ³, until it is the fewest steps within the limit.
+Starting and stopping at joint acceleration a cost t_a = ω_c / a over the cruise (ω_c the
+fastest joint's cruise speed at the segment's ends) and the average adds T_w ≈ a / j, least
+in sum at a = √(ω_c j), where the averaged start is the jerk-limited time-optimal one (a
+triangle of acceleration): toppra is given that acceleration, or the limit if lower.
+
+No limit is trusted to these arguments: the smoothed motion is measured (speeds,
+acceleration, torque with exact friction) and toppra runs again with the share of any
+exceeded limit cut by the excess; acceleration, torque and jerk keep ``margin`` in reserve
+from the start.
+
+Trajectory. The averaged s(t) is one cubic per grid step, so samples at every grid time
+with q, q̇ = q' ṡ and q̈ = q' s̈ + q'' ṡ² carry every knot, and the quintic Hermite pieces
+through them have the motion's jerk. Landmark visits are the segments' ends, at rest.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import CubicSpline, PPoly
+
+from spm_opt.errors import InputError, PlanningError
+from spm_opt.model import dynamics, kinematics
+from spm_opt.model.params import MM
+from spm_opt.planners.registry import planner_options, register
+from spm_opt.problem import Problem
+from spm_opt.trajectory import Trajectory
+
+_JERK_ITERATIONS = 8
+"""Rescalings of the moving-average window before giving up."""
+_ATTEMPTS = 4
+"""toppra runs per segment, each with tighter shares of the limits the last one exceeded."""
+_SPEED_SLACK = 1e-4
+"""Relative excess of a speed limit left to rounding; shares are cut this much below it."""
+
+
+@dataclass(frozen=True)
+class ToppraSettings:
+    """Discretisation settings, read from the problem's ``[planner.toppra]`` table.
+
+    Attributes
+    ----------
+    gridpoints : int
+        toppra's gridpoints per segment (clustered at the segment's ends).
+    path_samples : int
+        Inverse-kinematics samples per segment through which the joint-space spline runs.
+    margin : float
+        Fraction of the acceleration, torque and jerk limits kept in reserve for what the
+        moving average and the gridding change.
+    time_step_s : float
+        Step of the uniform time grid on which the path acceleration is piecewise constant
+        and the trajectory is sampled, s; the moving-average window is a whole number of
+        steps.
+    min_smoothing_s : float
+        Shortest moving-average window, s: the only smoothing when jerk is not limited (a
+        step in s̈ would be a step in the joint acceleration).
+    """
+
+    gridpoints: int = 800
+    path_samples: int = 100
+    margin: float = 0.01
+    time_step_s: float = 0.005
+    min_smoothing_s: float = 0.01
+
+    _RANGES = {
+        "gridpoints": (10, 100_000),
+        "path_samples": (4, 100_000),
+        "margin": (0.0, 0.5),
+        "time_step_s": (1e-4, 0.1),
+        "min_smoothing_s": (1e-4, 10.0),
+    }
+
+    @classmethod
+    def from_options(cls, options: dict[str, Any]) -> ToppraSettings:
+        """Settings from a ``[planner.toppra]`` table over the defaults; one-line errors."""
+        values: dict[str, Any] = {}
+        for key, value in options.items():
+            low, high = cls._RANGES[key]
+            integer = isinstance(getattr(cls, key), int)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or not (math.isfinite(value) and low <= value <= high)
+                or (integer and value != int(value))
+            ):
+                kind = "an integer" if integer else "a number"
+                raise InputError(
+                    f"planner.toppra.{key} = {value!r}: expected {kind} in [{low:g}, {high:g}]"
+                )
+            values[key] = int(value) if integer else float(value)
+        return cls(**values)
+
+
+OPTION_KEYS = tuple(f.name for f in dataclasses.fields(ToppraSettings))
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """One segment's path: joint angles q(s), rad, of the arc length s, mm."""
+
+    name: str
+    spline: CubicSpline
+
+    @property
+    def length(self) -> float:
+        """Arc length of the segment on the skull, mm."""
+        return float(self.spline.x[-1])
+
+    def derivatives(self, s: np.ndarray, orders: int = 3) -> list[np.ndarray]:
+        """q, q', q'', ... (N, 2) at arc lengths s (N,), mm: rad, rad/mm, rad/mm², ..."""
+        s = np.clip(s, 0.0, self.length)
+        return [self.spline(s, order) for order in range(orders)]
+
+
+def _segment(problem: Problem, index: int, samples: int) -> _Segment:
+    """The path of segment ``index``, through ``samples`` points of its arc."""
+    contour, names = problem.contour, problem.visit_names
+    start, end = contour.landmark_arc_lengths[index : index + 2]
+    s = np.linspace(0.0, end - start, samples)
+    points = contour.point_at(start + s)
+    q = kinematics.inverse_kinematics(
+        kinematics.project_landmarks(points, problem.robot.upper_platform_radius)
+    )
+    q[0], q[-1] = problem.waypoint_angles[index], problem.waypoint_angles[index + 1]
+    return _Segment(f"{names[index]}→{names[index + 1]}", CubicSpline(s / MM, q))
+
+
+def _gridpoints(length: float, count: int) -> np.ndarray:
+    """``count`` gridpoints on [0, length] spaced as s ∝ ξ² at both ends (smoothstep)."""
+    xi = np.linspace(0.0, 1.0, count)
+    return length * xi**2 * (3.0 - 2.0 * xi)
+
+
+@dataclass(frozen=True)
+class _Shares:
+    """The share of each limit given to toppra (1: the limit itself). The speeds start at
+    1 (a moving average of feasible speeds stays feasible where the bound is flat); the
+    acceleration and torque keep the settings' margin. Whatever the smoothed motion still
+    exceeds is cut by the excess, and toppra runs again."""
+
+    joint_speed: float = 1.0
+    tool_speed: float = 1.0
+    acceleration: float = 1.0
+    torque: float = 1.0
+
+    def tightened(self, excess: dict[str, float]) -> _Shares:
+        """Each share in ``excess`` (limit name: peak / limit) divided by its excess."""
+        cut = {k: getattr(self, k) / ratio * (1.0 - _SPEED_SLACK) for k, ratio in excess.items()}
+        return dataclasses.replace(self, **cut)
+
+
+@dataclass(frozen=True)
+class _Constraints:
+    """Every limit at N gridpoints as low ≤ a u + b x + c ≤ high, and x ≤ x_max, with u in
+    mm/s² and x in mm²/s²: arrays (N, m), one column per row of ``rows`` ((what, unit)),
+    whose nominal bound is ``limit`` (m,)."""
+
+    rows: tuple[tuple[str, str], ...]
+    limit: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    x_max: np.ndarray
+
+    def per_unit(self, unit: float) -> _Constraints:
+        """The same limits for the path parameter s / unit (unit in mm)."""
+        return dataclasses.replace(
+            self, a=self.a * unit, b=self.b * unit**2, x_max=self.x_max / unit**2
+        )
+
+    def at_rest(self, index: int) -> list[str]:
+        """The rows that fail with the path at rest (u = x = 0) at gridpoint ``index``, in
+        words: what they need there against their bound."""
+        c, low, high = self.c[index], self.low[index], self.high[index]
+        need = self.limit + np.maximum(c - high, low - c)
+        return [
+            f"{what} {need[k]:.4g} {unit} (allowed {self.limit[k]:.4g} {unit})"
+            for k, (what, unit) in enumerate(self.rows)
+            if need[k] > self.limit[k]
+        ]
+
+
+def _friction_range(friction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least and greatest friction torque (N, 2) over each gridpoint and its neighbours,
+    and 0 (at rest) at the two ends."""
+    padded = np.concatenate([friction[:1], friction, friction[-1:]])
+    near = np.stack([padded[:-2], padded[1:-1], padded[2:]])
+    low, high = near.min(axis=0), near.max(axis=0)
+    low[[0, -1]] = np.minimum(low[[0, -1]], 0.0)
+    high[[0, -1]] = np.maximum(high[[0, -1]], 0.0)
+    return low, high
+
+
+def _speed_bound(problem: Problem, q: np.ndarray, dq: np.ndarray, shares: _Shares) -> np.ndarray:
+    """Largest ṡ², mm²/s², at joint angles q (N, 2) with path tangents q' (N, 2), rad/mm:
+    each joint within its speed limit and the cut point within the tool-speed limit."""
+    limits = problem.limits
+    pace = np.max(np.abs(dq), axis=1) / (limits.max_joint_speed * shares.joint_speed)  # s/mm
+    if limits.max_tool_speed is not None:
+        rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), dq)
+        stretch = problem.contour.tool_speed(kinematics.forward_kinematics(q, 1.0), rates) / MM
+        pace = np.maximum(pace, stretch / (limits.max_tool_speed / MM * shares.tool_speed))
+    return 1.0 / pace**2
+
+
+def _constraints(
+    problem: Problem,
+    segment: _Segment,
+    s: np.ndarray,
+    acceleration: float | None,
+    shares: _Shares,
+) -> _Constraints:
+    """The limits at gridpoints s (N,), mm, with ``acceleration`` the joint acceleration
+    bound given to toppra, rad/s² (None: unlimited)."""
+    robot = problem.robot
+    actuator = robot.actuator
+    q, dq, ddq = segment.derivatives(s)
+    inertia = dynamics.mass_matrix(robot, q) + actuator.rotor_inertia_kg_m2 * np.eye(2)
+    friction_low, friction_high = _friction_range(dynamics.friction_torque(robot, q, dq))
+    torque = actuator.gear_efficiency * problem.max_joint_torque * shares.torque
+    rows = (("actuator 1 torque", "N·m"), ("actuator 2 torque", "N·m"))
+    limit = np.full(2, torque)
+    a = np.einsum("nij,nj->ni", inertia, dq)
+    b = np.einsum("nij,nj->ni", inertia, ddq) + dynamics.bias_torque(robot, q, dq)
+    c = dynamics.gravity_torque(robot, q)
+    low, high = -torque - friction_low, torque - friction_high
+    if acceleration is not None:
+        rows += (("theta1 acceleration", "rad/s²"), ("theta2 acceleration", "rad/s²"))
+        limit = np.append(limit, [acceleration, acceleration])
+        a, b, c = np.hstack([a, dq]), np.hstack([b, ddq]), np.hstack([c, np.zeros_like(c)])
+        low, high = (
+            np.hstack([low, np.full_like(q, -acceleration)]),
+            np.hstack([high, np.full_like(q, acceleration)]),
+        )
+    return _Constraints(rows, limit, a, b, c, low, high, _speed_bound(problem, q, dq, shares))
+
+
+@cache
+def _path_limits_class() -> type:
+    """toppra's constraint interface over :class:`_Constraints`, built on first use (toppra
+    is imported lazily: its algorithm module imports matplotlib)."""
+    from toppra.constraint import (
+        DiscretizationType,
+        LinearConstraint,
+        canlinear_colloc_to_interpolate,
+    )
+
+    class PathLimits(LinearConstraint):
+        """Precomputed coefficients, imposed in toppra's interpolation scheme."""
+
+        def __init__(self, limits: _Constraints) -> None:
+            super().__init__()
+            self.limits = limits
+            self.set_discretization_type(DiscretizationType.Interpolation)
+
+        def compute_constraint_params(self, path: Any, gridpoints: np.ndarray) -> tuple:
+            k = self.limits
+            m = k.a.shape[1]
+            f = np.broadcast_to(np.vstack([np.eye(m), -np.eye(m)]), (len(gridpoints), 2 * m, m))
+            g = np.hstack([k.high, -k.low])
+            a, b, c, f, g, _, _ = canlinear_colloc_to_interpolate(
+                k.a, k.b, k.c, f, g, None, None, gridpoints, identical=False
+            )
+            xbound = np.column_stack([np.zeros_like(k.x_max), k.x_max])
+            return a, b, c, f, g, None, xbound  # toppra's order: ..., ubound, xbound
+
+    return PathLimits
+
+
+def _check_rest(problem: Problem, segment: int, limits: _Constraints) -> None:
+    """Refuse a segment at whose end landmarks the robot cannot be held still (every segment
+    starts and ends at rest)."""
+    names = problem.visit_names
+    for index, landmark in ((0, names[segment]), (-1, names[segment + 1])):
+        failing = limits.at_rest(index)
+        if failing:
+            raise PlanningError(
+                f"max_joint_torque_nm = {problem.max_joint_torque:g}: holding the robot still "
+                f"at {landmark} against gravity and friction takes {'; '.join(failing)}"
+            )
+
+
+def _parameterise(segment: _Segment, s: np.ndarray, limits: _Constraints) -> np.ndarray:
+    """toppra's time-optimal path speeds ṡ (N,), mm/s, at gridpoints s (N,), mm, from rest
+    to rest; a PlanningError naming the place and the likely culprit if it fails.
+
+    toppra works in the path parameter σ = s / ℓ with ℓ, mm, the largest speed allowed in
+    1 s: then σ̇² ≤ 1, which keeps its LPs well scaled (with s in mm and ṡ² up to 1e4
+    mm²/s², its solver fails on the finest gridpoints).
+    """
+    import toppra
+    from toppra.algorithm import ParameterizationReturnCode
+
+    unit = math.sqrt(float(np.max(limits.x_max)))
+    knots = segment.spline.x
+    path = toppra.SplineInterpolator(knots / unit, segment.spline(knots))
+    instance = toppra.algorithm.TOPPRA(
+        [_path_limits_class()(limits.per_unit(unit))],
+        path,
+        gridpoints=s / unit,
+        solver_wrapper="seidel",
+    )
+    _, speed, _, controllable = instance.compute_parameterization(0.0, 0.0, return_data=True)
+    code = instance.problem_data.return_code
+    if code == ParameterizationReturnCode.Ok and np.all(np.isfinite(speed)):
+        return np.asarray(speed, dtype=float) * unit
+    lost = np.flatnonzero(np.any(np.isnan(controllable), axis=1))
+    raise PlanningError(_failure(code.value, segment, s, limits, int(lost[-1]) if lost.size else 0))
+
+
+def _failure(code: str, segment: _Segment, s: np.ndarray, limits: _Constraints, where: int) -> str:
+    """toppra's failure in words: where on the segment, and the likely culprit."""
+    failing = limits.at_rest(where)
+    culprit = (
+        f"there, gravity and friction alone need {'; '.join(failing)}"
+        if failing
+        else "no limit fails there at rest: the joint acceleration and actuator torque "
+        "limits together leave no path acceleration that keeps the motion going"
+    )
+    return (
+        f"toppra: {code} in segment {segment.name} at {s[where]:.4g} mm of "
+        f"{segment.length:.4g} mm; {culprit}"
+    )
+
+
+def _uniform_profile(s: np.ndarray, speed: np.ndarray, step: float) -> PPoly:
+    """s(t), mm, on a uniform time grid of about ``step`` s, from toppra's path speeds (N,),
+    mm/s, at gridpoints s (N,), mm.
+
+    toppra's motion has a constant s̈ between gridpoints, so ṡ is piecewise linear in time;
+    it is sampled at the grid's times and joined linearly again (each step's s̈ is the mean
+    of toppra's over that step). Where that cuts a corner of ṡ(t) the path would end short
+    (by parts per million here), so the grid is stretched in time until it ends exactly at
+    the path's end: the speeds stay toppra's, the accelerations shrink. At rest, and
+    extrapolated so, before 0 and after the end.
+    """
+    durations = 2.0 * np.diff(s) / (speed[:-1] + speed[1:])
+    if not np.all(np.isfinite(durations)):
+        raise PlanningError("toppra: the path speed is zero between two gridpoints")
+    knots = np.concatenate([[0.0], np.cumsum(durations)])
+    times = np.linspace(0.0, knots[-1], max(1, math.ceil(knots[-1] / step)) + 1)
+    rate = np.interp(times, knots, speed)
+    rate[[0, -1]] = 0.0
+    steps = np.diff(times) * s[-1] / np.trapezoid(rate, times)
+    distance = np.concatenate([[0.0], np.cumsum(steps * (rate[:-1] + rate[1:]) / 2.0)])
+    times = np.concatenate([[0.0], np.cumsum(steps)])
+    zero = np.zeros(1)
+    coefficients = np.vstack(
+        [
+            np.concatenate([zero, np.diff(rate) / steps / 2.0, zero]),
+            np.concatenate([zero, rate[:-1], zero]),
+            np.concatenate([zero, distance[:-1], s[-1:]]),
+        ]
+    )
+    return PPoly(coefficients, np.concatenate([[-1.0], times, [times[-1] + 1.0]]))
+
+
+@dataclass(frozen=True)
+class _Averaged:
+    """The moving average of s(t) over ``window`` grid steps: s_w(t) = (1/T_w) ∫ s over
+    [t − T_w, t]. It is one cubic on each step, from 0 to the profile's end plus T_w."""
+
+    profile: PPoly
+    window: int
+
+    @property
+    def step(self) -> float:
+        """Length of a grid step, s."""
+        return float(self.profile.x[2] - self.profile.x[1])
+
+    @property
+    def times(self) -> np.ndarray:
+        """The grid's times, s: every knot of s_w."""
+        steps = len(self.profile.x) - 3 + self.window
+        return np.linspace(0.0, self.profile.x[-2] + self.window * self.step, steps + 1)
+
+    def __call__(self, t: np.ndarray) -> list[np.ndarray]:
+        """s_w, ṡ_w, s̈_w and s⃛_w at times t (N,): mm, mm/s, mm/s², mm/s³."""
+        width = self.window * self.step
+        integral = self.profile.antiderivative()
+        values = [(integral(t) - integral(t - width)) / width]
+        for order in range(3):
+            derivative = self.profile.derivative(order) if order else self.profile
+            values.append((derivative(t) - derivative(t - width)) / width)
+        return values
+
+
+def _peak_jerk(segment: _Segment, motion: _Averaged) -> float:
+    """Largest joint jerk, rad/s³, of the averaged motion: q⃛ = q' s⃛ + 3 q'' ṡ s̈ + q''' ṡ³,
+    in the middle of every grid step (s⃛ is constant on each)."""
+    t = motion.times
+    s, sd, sdd, sddd = motion((t[:-1] + t[1:]) / 2.0)
+    _, dq, ddq, dddq = segment.derivatives(s, orders=4)
+    jerk = dq * sddd[:, None] + 3.0 * ddq * (sd * sdd)[:, None] + dddq * sd[:, None] ** 3
+    return float(np.max(np.abs(jerk)))
+
+
+def _smoothed(
+    segment: _Segment, profile: PPoly, first: float, jerk: float | None, shortest: float
+) -> _Averaged:
+    """The moving average whose peak joint jerk is within ``jerk``, rad/s³ (None: the
+    ``shortest`` window, s): from ``first`` s, the window is rescaled by the measured peak
+    jerk (which falls as 1 / window) until it is the fewest grid steps that fit."""
+    step = float(profile.x[2] - profile.x[1])
+    fewest = max(1, math.ceil(shortest / step * (1.0 - 1e-3)))
+    window = max(fewest, math.ceil(first / step * (1.0 - 1e-3)))
+    fits, too_short = None, 0
+    for _ in range(_JERK_ITERATIONS):
+        motion = _Averaged(profile, window)
+        if jerk is None:
+            return motion
+        peak = _peak_jerk(segment, motion)
+        if peak <= jerk:
+            fits = motion
+        else:
+            too_short = max(too_short, window)
+        window = max(fewest, too_short + 1, math.ceil(window * peak / jerk - 1e-9))
+        if fits is not None and window >= fits.window:
+            return fits
+    if fits is not None:
+        return fits
+    raise PlanningError(
+        f"toppra: segment {segment.name}: no moving-average window found that keeps the "
+        f"joint jerk within {jerk:g} rad/s³ (last {window * step:.4g} s, peak {peak:.4g})"
+    )
+
+
+def _toppra_acceleration(
+    problem: Problem, segment: _Segment, shares: _Shares, jerk: float | None
+) -> float | None:
+    """The joint acceleration bound, rad/s², given to toppra: the limit, or less where the
+    jerk limit (rad/s³, None: unlimited) makes a gentler start faster (a = √(ω_c j), see
+    the module docstring)."""
+    limit = problem.limits.max_joint_acceleration
+    bound = None if limit is None else limit * shares.acceleration
+    if jerk is None:
+        return bound
+    ends = np.array([0.0, segment.length])
+    q, dq = segment.derivatives(ends, orders=2)
+    cruise = float(np.max(np.abs(dq) * np.sqrt(_speed_bound(problem, q, dq, shares))[:, None]))
+    gentle = math.sqrt(cruise * jerk)
+    return gentle if bound is None else min(bound, gentle)
+
+
+@dataclass(frozen=True)
+class _Piece:
+    """One segment's motion: samples (t from 0, s; q, qd, qdd (n, 2), SI) and figures."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    toppra_duration: float
+    window: float
+    acceleration: float | None
+    runs: int = 1
+
+
+def _attempt(
+    problem: Problem, index: int, segment: _Segment, settings: ToppraSettings, shares: _Shares
+) -> _Piece:
+    """toppra on one segment within ``shares`` of the limits, then smoothed and sampled."""
+    limit = problem.limits.max_joint_jerk
+    jerk = None if limit is None else limit * (1.0 - settings.margin)
+    s = _gridpoints(segment.length, settings.gridpoints)
+    acceleration = _toppra_acceleration(problem, segment, shares, jerk)
+    limits = _constraints(problem, segment, s, acceleration, shares)
+    _check_rest(problem, index, limits)
+    profile = _uniform_profile(s, _parameterise(segment, s, limits), settings.time_step_s)
+    first = 0.0 if jerk is None or acceleration is None else acceleration / jerk
+    motion = _smoothed(segment, profile, first, jerk, settings.min_smoothing_s)
+    t = motion.times
+    path_s, sd, sdd, _ = motion(t)
+    q, dq, ddq = segment.derivatives(path_s)
+    q[[0, -1]] = problem.waypoint_angles[index : index + 2]
+    qd = dq * sd[:, None]
+    qdd = dq * sdd[:, None] + ddq * sd[:, None] ** 2
+    qd[[0, -1]] = qdd[[0, -1]] = 0.0
+    return _Piece(t, q, qd, qdd, float(profile.x[-2]), motion.window * motion.step, acceleration)
+
+
+def _excess(problem: Problem, piece: _Piece) -> dict[str, float]:
+    """The limits the sampled motion exceeds (beyond ``_SPEED_SLACK`` for the speeds), by
+    name: peak / limit. Torques from the model with exact friction, as the actuators
+    deliver them."""
+    limits, robot = problem.limits, problem.robot
+    load = dynamics.inverse_dynamics(robot, piece.q, piece.qd, piece.qdd)
+    peaks = {
+        "joint_speed": (np.max(np.abs(piece.qd)) / limits.max_joint_speed, _SPEED_SLACK),
+        "torque": (
+            np.max(np.abs(robot.actuator.drive_torque(load, piece.qd, piece.qdd)))
+            / problem.max_joint_torque,
+            0.0,
+        ),
+    }
+    if limits.max_tool_speed is not None:
+        directions = kinematics.forward_kinematics(piece.q, 1.0)
+        rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(piece.q, 1.0), piece.qd)
+        speed = problem.contour.tool_speed(directions, rates)
+        peaks["tool_speed"] = (np.max(speed) / limits.max_tool_speed, _SPEED_SLACK)
+    if limits.max_joint_acceleration is not None:
+        peaks["acceleration"] = (np.max(np.abs(piece.qdd)) / limits.max_joint_acceleration, 0.0)
+    return {name: float(peak) for name, (peak, slack) in peaks.items() if peak > 1.0 + slack}
+
+
+def _segment_motion(problem: Problem, index: int, settings: ToppraSettings) -> _Piece:
+    """The segment's motion within every limit: toppra and smoothing, again with tighter
+    shares of whatever limit the smoothed motion still exceeds."""
+    segment = _segment(problem, index, settings.path_samples)
+    keep = 1.0 - settings.margin
+    shares = _Shares(acceleration=keep, torque=keep)
+    for run in range(1, _ATTEMPTS + 1):
+        piece = _attempt(problem, index, segment, settings, shares)
+        excess = _excess(problem, piece)
+        if not excess:
+            return dataclasses.replace(piece, runs=run)
+        shares = shares.tightened(excess)
+    worst = ", ".join(f"{name} {ratio:.4g} times its limit" for name, ratio in excess.items())
+    raise PlanningError(
+        f"toppra: segment {segment.name}: the smoothed motion still reaches {worst} after "
+        f"{_ATTEMPTS} attempts with tighter limits; raise planner.toppra.margin"
+    )
+
+
+def _chain(
+    pieces: list[_Piece], starts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The segments' samples one after the other, each from its start time (s); the landmark
+    between two segments (at rest in both) once."""
+    t = [pieces[0].t[:1]] + [p.t[1:] + start for p, start in zip(pieces, starts, strict=True)]
+    q, qd, qdd = (
+        np.vstack([getattr(pieces[0], name)[:1]] + [getattr(p, name)[1:] for p in pieces])
+        for name in ("q", "qd", "qdd")
+    )
+    return np.concatenate(t), q, qd, qdd
+
+
+class ToppraPlanner:
+    """Time-optimal motion along the planned contour, at rest at every landmark, within every
+    limit of the problem; see the module docstring."""
+
+    name = "toppra"
+
+    def settings(self, problem: Problem) -> ToppraSettings:
+        return ToppraSettings.from_options(planner_options(problem, self.name, OPTION_KEYS))
+
+    def plan(self, problem: Problem) -> Trajectory:
+        settings = self.settings(problem)
+        started = time.perf_counter()
+        pieces = [
+            _segment_motion(problem, k, settings) for k in range(len(problem.segment_durations))
+        ]
+        durations = np.array([piece.t[-1] for piece in pieces])
+        starts = np.concatenate([[0.0], np.cumsum(durations)])
+        samples = _chain(pieces, starts[:-1])
+        statistics = {
+            "status": "Ok",
+            "solve_time_s": time.perf_counter() - started,
+            "gridpoints": settings.gridpoints,
+            "samples": int(samples[0].size),
+            "segment_durations_s": durations.tolist(),
+            "toppra_durations_s": [piece.toppra_duration for piece in pieces],
+            "smoothing_windows_s": [piece.window for piece in pieces],
+            "toppra_accelerations_rad_s2": [piece.acceleration for piece in pieces],
+            "toppra_runs": [piece.runs for piece in pieces],
+            "settings": dataclasses.asdict(settings),
+        }
+        metadata = {
+            "landmark_times_s": starts.tolist(),
+            "landmarks": problem.visit_names,
+            "statistics": statistics,
+        }
+        return Trajectory.from_samples(*samples, metadata=metadata)
+
+
+register(ToppraPlanner())
