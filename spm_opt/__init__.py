@@ -5,10 +5,12 @@ for brain surgery.
     problem = so.load_problem("problems/craniotomy_bone_flap.toml")
     trajectory = so.plan(problem, planner="cubic")
     report = so.evaluate(problem, trajectory)
+    table = so.compare(problem)  # every planner, one row each (a pandas DataFrame)
 """
 
 import logging
 
+from spm_opt.comparison import compare
 from spm_opt.contour import Contour
 from spm_opt.errors import (
     InputError,
@@ -42,6 +44,7 @@ __all__ = [
     "UnknownPlannerError",
     "UnreachableError",
     "Violation",
+    "compare",
     "evaluate",
     "inverse_dynamics",
     "mechanical_energy",

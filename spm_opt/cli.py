@@ -49,6 +49,18 @@ def _parser() -> argparse.ArgumentParser:
         help="sampling rate of the CSV (default 100 Hz, breakpoints included)",
     )
 
+    compare = commands.add_parser(
+        "compare", help="run every planner on a problem and compare them (table and figures)"
+    )
+    compare.add_argument("problem", type=Path, help="problem TOML file")
+    compare.add_argument(
+        "--planners",
+        default=None,
+        metavar="NAMES",
+        help="comma-separated planner names (default: every registered planner)",
+    )
+    compare.add_argument("--out", required=True, type=Path, help="output directory")
+
     evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
     evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
@@ -93,7 +105,42 @@ def _evaluate(args: argparse.Namespace) -> None:
     print(json.dumps(report.to_dict(), indent=2) if args.json else report.to_markdown(), end="")
 
 
-_COMMANDS = {"reproduce": _reproduce, "plan": _plan, "evaluate": _evaluate}
+def _compare(args: argparse.Namespace) -> None:
+    from spm_opt.comparison import Outcome, run_planners, write_comparison
+    from spm_opt.problem import load_problem
+
+    names = None
+    if args.planners is not None:
+        names = [name.strip() for name in args.planners.split(",") if name.strip()]
+        if not names:
+            raise InputError(f"--planners {args.planners!r}: expected comma-separated names")
+    problem = load_problem(args.problem)
+
+    def progress(index: int, count: int, name: str, outcome: Outcome | None) -> None:
+        if outcome is None:
+            print(f"[{index}/{count}] {name} ...", file=sys.stderr, flush=True)
+        else:
+            result = outcome.error or (
+                f"{outcome.trajectory.duration:.2f} s plan, "  # type: ignore[union-attr]
+                f"{len(outcome.report.violations)} violation(s)"  # type: ignore[union-attr]
+            )
+            print(
+                f"[{index}/{count}] {name}: {result} ({outcome.wall_time_s:.1f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    outcomes = run_planners(problem, names, progress)
+    for path in write_comparison(problem, outcomes, args.out):
+        print(path)
+
+
+_COMMANDS = {
+    "reproduce": _reproduce,
+    "plan": _plan,
+    "compare": _compare,
+    "evaluate": _evaluate,
+}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

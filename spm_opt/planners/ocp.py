@@ -715,5 +715,16 @@ MIN_JERK = register(
     )
 )
 MIX = register(
-    OcpPlanner("ocp-mix", OcpSettings(time_weight=1.0, energy_weight=1.0, jerk_weight=1.0))
+    OcpPlanner(
+        "ocp-mix",
+        # by default a quick and smooth cut; set the weights in [planner.ocp-mix]
+        OcpSettings(
+            timing="free",
+            time_weight=1.0,
+            jerk_weight=1.0,
+            nodes_per_phase=16,
+            checks_per_interval=3,
+            margin=0.02,
+        ),
+    )
 )

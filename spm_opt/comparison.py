@@ -1,0 +1,256 @@
+"""The planner comparison: every planner on one problem, judged by the one evaluator.
+
+    import spm_opt as so
+    table = so.compare(so.load_problem("problems/craniotomy_bone_flap.toml"))
+
+A planner that fails gets a row with its error; the others still run.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from spm_opt.evaluate import Report, evaluate
+from spm_opt.files import write_atomically
+from spm_opt.model.params import MM
+from spm_opt.planners import PLANNERS, get_planner, plan
+from spm_opt.problem import Problem
+from spm_opt.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+COLUMNS = (
+    "planner",
+    "status",
+    "solve_time_s",
+    "wall_time_s",
+    "duration_s",
+    "duration_over_lower_bound",
+    "peak_torque_1_nm",
+    "peak_torque_2_nm",
+    "rms_torque_1_nm",
+    "rms_torque_2_nm",
+    "energy_j",
+    "effort_n2m2s",
+    "peak_joint_speed_over_limit",
+    "max_contour_deviation_mm",
+    "rms_contour_deviation_mm",
+    "max_tool_speed_mm_s",
+    "mean_tool_speed_mm_s",
+    "tool_speed_cv",
+    "rms_jerk_1_rad_s3",
+    "rms_jerk_2_rad_s3",
+    "max_landmark_error_mm",
+    "violations",
+    "error",
+)
+"""The comparison table's columns, in order."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One planner's result: its plan and the evaluator's report, or the error it raised;
+    ``wall_time_s`` is the whole planning call (with any construction and evaluation)."""
+
+    planner: str
+    wall_time_s: float
+    trajectory: Trajectory | None = None
+    report: Report | None = None
+    error: str | None = None
+
+    def row(self) -> dict[str, object]:
+        """The outcome as a row of the comparison table (NaN where the planner failed)."""
+        row: dict[str, object] = dict.fromkeys(COLUMNS, np.nan)
+        row.update(planner=self.planner, status="failed", violations="", error=self.error or "")
+        if self.report is None or self.trajectory is None:
+            return row
+        r = self.report
+        statistics = self.trajectory.metadata.get("statistics", {})
+        row.update(
+            status="ok" if not r.violations else f"{len(r.violations)} violation(s)",
+            solve_time_s=statistics.get("solve_time_s", self.wall_time_s),
+            wall_time_s=self.wall_time_s,
+            duration_s=r.duration_s,
+            duration_over_lower_bound=r.duration_over_lower_bound,
+            peak_torque_1_nm=r.peak_torque_nm[0],
+            peak_torque_2_nm=r.peak_torque_nm[1],
+            rms_torque_1_nm=r.rms_torque_nm[0],
+            rms_torque_2_nm=r.rms_torque_nm[1],
+            energy_j=r.energy_j,
+            effort_n2m2s=r.effort_n2m2s,
+            peak_joint_speed_over_limit=max(r.peak_joint_speed_rad_s) / r.joint_speed_limit_rad_s,
+            max_contour_deviation_mm=r.max_contour_deviation_mm,
+            rms_contour_deviation_mm=r.rms_contour_deviation_mm,
+            max_tool_speed_mm_s=r.max_tool_speed_mm_s,
+            mean_tool_speed_mm_s=r.mean_tool_speed_mm_s,
+            tool_speed_cv=r.tool_speed_cv,
+            rms_jerk_1_rad_s3=r.rms_jerk_rad_s3[0],
+            rms_jerk_2_rad_s3=r.rms_jerk_rad_s3[1],
+            max_landmark_error_mm=r.max_landmark_error_mm,
+            violations="; ".join(str(v) for v in r.violations),
+        )
+        return row
+
+
+Progress = Callable[[int, int, str, "Outcome | None"], None]
+"""Called before each planner (outcome None) and after it: (index from 1, count, name,
+outcome)."""
+
+
+def run_planners(
+    problem: Problem, planners: Sequence[str] | None = None, progress: Progress | None = None
+) -> list[Outcome]:
+    """Plan ``problem`` with each planner (default: every registered one, by name) and
+    evaluate every plan. Unknown names are refused before anything runs."""
+    names = sorted(PLANNERS) if planners is None else list(planners)
+    for name in names:
+        get_planner(name)
+    outcomes = []
+    for index, name in enumerate(names, start=1):
+        if progress is not None:
+            progress(index, len(names), name, None)
+        started = time.perf_counter()
+        try:
+            trajectory = plan(problem, name)
+            outcome = Outcome(
+                name, time.perf_counter() - started, trajectory, evaluate(problem, trajectory)
+            )
+        except Exception as error:  # noqa: BLE001 - one planner's failure is a row
+            outcome = Outcome(
+                name, time.perf_counter() - started, error=f"{type(error).__name__}: {error}"
+            )
+        if progress is not None:
+            progress(index, len(names), name, outcome)
+        outcomes.append(outcome)
+    return outcomes
+
+
+def comparison_table(outcomes: Sequence[Outcome]) -> pd.DataFrame:
+    """One row per planner, the columns of :data:`COLUMNS`."""
+    import pandas as pd
+
+    return pd.DataFrame([outcome.row() for outcome in outcomes], columns=list(COLUMNS))
+
+
+def compare(problem: Problem, planners: Sequence[str] | None = None) -> pd.DataFrame:
+    """Every planner (default: all registered) on ``problem``, as a table (see COLUMNS)."""
+    return comparison_table(run_planners(problem, planners))
+
+
+def _limits_lines(problem: Problem) -> list[str]:
+    limits = problem.limits
+
+    def shown(value: float | None, scale: float, unit: str) -> str:
+        return "not limited" if value is None else f"{value / scale:.4g} {unit}"
+
+    return [
+        f"- joint speed: {limits.max_joint_speed:.4g} rad/s "
+        f"({limits.max_joint_speed * 60 / (2 * np.pi):.4g} rpm)",
+        f"- joint acceleration: {shown(limits.max_joint_acceleration, 1.0, 'rad/s²')}",
+        f"- joint jerk: {shown(limits.max_joint_jerk, 1.0, 'rad/s³')}",
+        f"- actuator torque: {problem.max_joint_torque:.4g} N·m",
+        f"- tool speed on the skull: {shown(limits.max_tool_speed, MM, 'mm/s')}",
+        f"- contour tolerance: {shown(limits.contour_tolerance, MM, 'mm')}",
+    ]
+
+
+_SHOWN = {  # column: (heading, format)
+    "planner": ("planner", "{}"),
+    "status": ("status", "{}"),
+    "solve_time_s": ("solve s", "{:.3g}"),
+    "wall_time_s": ("wall s", "{:.3g}"),
+    "duration_s": ("duration s", "{:.2f}"),
+    "duration_over_lower_bound": ("over bound", "{:.4f}"),
+    "max_contour_deviation_mm": ("max dev. mm", "{:.3g}"),
+    "rms_contour_deviation_mm": ("RMS dev. mm", "{:.3g}"),
+    "max_tool_speed_mm_s": ("max tool mm/s", "{:.3f}"),
+    "mean_tool_speed_mm_s": ("mean tool mm/s", "{:.3f}"),
+    "tool_speed_cv": ("tool CV", "{:.3f}"),
+    "peak_joint_speed_over_limit": ("joint speed / limit", "{:.3f}"),
+    "peak_torque_1_nm": ("peak τ1 N·m", "{:.3f}"),
+    "peak_torque_2_nm": ("peak τ2 N·m", "{:.3f}"),
+    "rms_torque_1_nm": ("RMS τ1 N·m", "{:.4f}"),
+    "rms_torque_2_nm": ("RMS τ2 N·m", "{:.4f}"),
+    "energy_j": ("energy J", "{:.4f}"),
+    "effort_n2m2s": ("∫τᵀτ N²m²s", "{:.4f}"),
+    "rms_jerk_1_rad_s3": ("RMS jerk 1 rad/s³", "{:.3g}"),
+    "rms_jerk_2_rad_s3": ("RMS jerk 2 rad/s³", "{:.3g}"),
+}
+
+
+def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
+    """The problem and its limits, the table, then each planner's violations or error."""
+    report = next((o.report for o in outcomes if o.report is not None), None)
+    lines = [
+        f"# Planner comparison: {problem.name}",
+        "",
+        problem.description or "",
+        "",
+        f"- problem file: {problem.source or '(built in code)'}"
+        + (f" (sha256 {problem.source_sha256[:12]}…)" if problem.source_sha256 else ""),
+        f"- landmarks, in visiting order: {' → '.join(problem.visit_names)}",
+        f"- contour length: {problem.contour.length / MM:.2f} mm; the limits allow no cut "
+        "along it in less than "
+        + (f"{report.duration_lower_bound_s:.2f} s" if report else "(no plan evaluated)"),
+        f"- segment durations in the problem (fixed-time planners): "
+        f"{', '.join(f'{d:g}' for d in problem.segment_durations)} s",
+        "",
+        "Limits every plan is judged by (a violation: more than 0.5 % over a limit, or "
+        "0.01 mm outside the contour tolerance):",
+        "",
+        *_limits_lines(problem),
+        "",
+    ]
+    headings = [heading for heading, _ in _SHOWN.values()]
+    lines += ["| " + " | ".join(headings) + " |", "|" + "---|" * len(headings)]
+    for outcome in outcomes:
+        row = outcome.row()
+        cells = [
+            "—" if isinstance(row[key], float) and np.isnan(row[key]) else fmt.format(row[key])
+            for key, (_, fmt) in _SHOWN.items()
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "## Violations and failures", ""]
+    for outcome in outcomes:
+        if outcome.error:
+            lines.append(f"- **{outcome.planner}** failed: {outcome.error}")
+        elif outcome.report is not None and outcome.report.violations:
+            found = "; ".join(str(v) for v in outcome.report.violations)
+            lines.append(f"- **{outcome.planner}**: {found}")
+        else:
+            lines.append(f"- **{outcome.planner}**: no limit is violated")
+    return "\n".join(lines) + "\n"
+
+
+def write_comparison(
+    problem: Problem, outcomes: Sequence[Outcome], out_dir: str | Path
+) -> list[Path]:
+    """Write comparison.csv, comparison.md and the figures into ``out_dir``, all or none;
+    return the paths."""
+    from spm_opt import comparison_figures as figures
+    from spm_opt.plots import to_png
+
+    out = Path(out_dir)
+    contents: dict[Path, str | bytes] = {
+        out / "comparison.csv": comparison_table(outcomes).to_csv(index=False),
+        out / "comparison.md": comparison_markdown(problem, outcomes),
+    }
+    planned = [o for o in outcomes if o.trajectory is not None]
+    if planned:
+        drawn = {
+            "joints.png": figures.joints(problem, planned),
+            "torques.png": figures.torques(problem, planned),
+            "tool_speed.png": figures.tool_speed(problem, planned),
+            "cuts.png": figures.cuts(problem, planned),
+            "headline.png": figures.headline(problem, planned),
+        }
+        contents.update({out / name: to_png(figure) for name, figure in drawn.items()})
+    write_atomically(contents)
+    return sorted(contents)

@@ -1,0 +1,183 @@
+"""The comparison's figures: every planner's plan on the same axes, one colour each."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from spm_opt.model import dynamics, kinematics
+from spm_opt.model.params import DEG, MM
+from spm_opt.problem import Problem
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from spm_opt.comparison import Outcome
+
+RATE_HZ = 200.0
+"""Sampling rate of the drawn curves, Hz."""
+_COLOURS = [f"C{k}" for k in range(10)]
+
+
+def _figure(size: tuple[float, float]) -> Figure:
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=size, layout="constrained")
+
+
+def _colour(index: int) -> str:
+    return _COLOURS[index % len(_COLOURS)]
+
+
+def _samples(outcome: Outcome) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """t (N,), s, and q, q̇, q̈ (N, 2) of a plan on the drawing grid."""
+    trajectory = outcome.trajectory
+    assert trajectory is not None
+    t = trajectory.time_grid(RATE_HZ)
+    return t, trajectory.position(t), trajectory.velocity(t), trajectory.acceleration(t)
+
+
+def _cut_progress(problem: Problem, outcome: Outcome) -> tuple[np.ndarray, np.ndarray]:
+    """Distance cut so far (N,), mm, and the tool speed (N,), mm/s, on the drawing grid."""
+    t, q, qd, _ = _samples(outcome)
+    rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
+    speed = problem.contour.tool_speed(kinematics.forward_kinematics(q, 1.0), rates) / MM
+    distance = np.concatenate([[0.0], np.cumsum(np.diff(t) * (speed[1:] + speed[:-1]) / 2)])
+    return distance, speed
+
+
+def joints(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+    """Joint angles (deg) over time (s), one colour per planner."""
+    figure = _figure((10, 6))
+    axes = figure.subplots(2, 1, sharex=True)
+    for index, outcome in enumerate(outcomes):
+        t, q, _, _ = _samples(outcome)
+        for joint, axis in enumerate(axes):
+            axis.plot(t, q[:, joint] / DEG, color=_colour(index), label=outcome.planner)
+    for joint, axis in enumerate(axes):
+        axis.set_ylabel(f"θ{joint + 1} (deg)")
+        axis.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=2)
+    axes[1].set_xlabel("time (s)")
+    figure.suptitle(f"{problem.name}: joint angles")
+    return figure
+
+
+def torques(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+    """Actuator torques (N·m, the model with exact friction) over time (s)."""
+    figure = _figure((10, 6))
+    axes = figure.subplots(2, 1, sharex=True)
+    robot = problem.robot
+    for index, outcome in enumerate(outcomes):
+        t, q, qd, qdd = _samples(outcome)
+        load = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
+        torque = robot.actuator.drive_torque(load, qd, qdd)
+        for joint, axis in enumerate(axes):
+            axis.plot(t, torque[:, joint], color=_colour(index), label=outcome.planner)
+    for joint, axis in enumerate(axes):
+        axis.set_ylabel(f"τ{joint + 1} (N·m)")
+        axis.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=2)
+    axes[1].set_xlabel("time (s)")
+    figure.suptitle(
+        f"{problem.name}: actuator torques (limit {problem.max_joint_torque:g} N·m, off scale)"
+    )
+    return figure
+
+
+def tool_speed(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+    """The tool's speed on the skull (mm/s) against the distance cut so far (mm), with the
+    limit and the landmarks' places along the contour."""
+    figure = _figure((10, 4.5))
+    axis = figure.subplots()
+    for index, outcome in enumerate(outcomes):
+        distance, speed = _cut_progress(problem, outcome)
+        axis.plot(distance, speed, color=_colour(index), label=outcome.planner)
+    for place, name in zip(
+        problem.contour.landmark_arc_lengths / MM, problem.visit_names, strict=True
+    ):
+        axis.axvline(place, color="0.8", linewidth=0.8, zorder=0)
+        axis.annotate(name, (place, 0.0), textcoords="offset points", xytext=(2, 2), fontsize=8)
+    if problem.limits.max_tool_speed is not None:
+        axis.axhline(
+            problem.limits.max_tool_speed / MM, color="black", linestyle="--", label="limit"
+        )
+    axis.set_xlabel("distance cut so far (mm)")
+    axis.set_ylabel("tool speed (mm/s)")
+    axis.grid(True, alpha=0.3)
+    axis.legend(fontsize=8, ncol=2)
+    axis.set_title(f"{problem.name}: tool speed along the cut")
+    return figure
+
+
+def cuts(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+    """Left: every cut on the skull seen from above (mm) with the planned contour and the
+    landmarks. Right: each cut's distance from the contour (mm, log scale) along it, with
+    the tolerance."""
+    figure = _figure((13, 6))
+    top, off = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.3]})
+    contour = problem.contour
+    planned = contour.point_at(np.linspace(0.0, contour.length, 2000)) / MM
+    top.plot(planned[:, 0], planned[:, 1], color="black", linewidth=3, alpha=0.25)
+    top.plot([], [], color="black", linewidth=3, alpha=0.25, label="planned contour")
+    for index, outcome in enumerate(outcomes):
+        t, q, _, _ = _samples(outcome)
+        cut = outcome.trajectory.cut_points(contour, t) / MM  # type: ignore[union-attr]
+        top.plot(cut[:, 0], cut[:, 1], color=_colour(index), linewidth=1, label=outcome.planner)
+        distance, _ = _cut_progress(problem, outcome)
+        deviation = contour.deviation(kinematics.forward_kinematics(q, 1.0)) / MM
+        off.semilogy(distance, np.maximum(deviation, 1e-6), color=_colour(index))
+    landmarks = problem.landmarks / MM
+    top.scatter(landmarks[:, 0], landmarks[:, 1], color="black", s=20, zorder=3)
+    for name, (x, y, _) in zip(problem.landmark_names, landmarks, strict=True):
+        top.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5))
+    top.set_aspect("equal")
+    top.set_xlabel("x (mm)")
+    top.set_ylabel("y (mm)")
+    top.legend(fontsize=8)
+    top.set_title("cuts on the skull, seen from above")
+    if problem.limits.contour_tolerance is not None:
+        off.axhline(problem.limits.contour_tolerance / MM, color="black", linestyle="--")
+        off.annotate("tolerance", (0.0, problem.limits.contour_tolerance / MM), fontsize=8)
+    off.set_xlabel("distance cut so far (mm)")
+    off.set_ylabel("distance from the planned contour (mm)")
+    off.set_title("how far each cut strays (floor 1e-6 mm)")
+    for axis in (top, off):
+        axis.grid(True, alpha=0.3)
+    figure.suptitle(problem.name)
+    return figure
+
+
+_HEADLINES = (  # (title, value of a report, log scale)
+    ("duration over the lower bound", lambda r: r.duration_over_lower_bound, False),
+    ("max distance from the contour (mm)", lambda r: r.max_contour_deviation_mm, True),
+    ("max tool speed (mm/s)", lambda r: r.max_tool_speed_mm_s, False),
+    ("RMS jerk, larger joint (rad/s³)", lambda r: max(r.rms_jerk_rad_s3), True),
+    ("∫τᵀτ dt (N²·m²·s)", lambda r: r.effort_n2m2s, False),
+    ("violations", lambda r: len(r.violations), False),
+)
+
+
+def headline(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+    """Bars of the headline figures, one panel per figure, one bar per planner."""
+    figure = _figure((13, 7))
+    axes = figure.subplots(2, 3).ravel()
+    names = [o.planner for o in outcomes]
+    colours = [_colour(k) for k in range(len(outcomes))]
+    limits = problem.limits
+    for axis, (title, value, log) in zip(axes, _HEADLINES, strict=True):
+        values = [value(o.report) for o in outcomes]
+        axis.bar(names, values, color=colours, log=log)
+        axis.set_title(title, fontsize=10)
+        axis.tick_params(axis="x", labelrotation=45, labelsize=8)
+        axis.grid(True, axis="y", alpha=0.3)
+        if title.startswith("max tool") and limits.max_tool_speed is not None:
+            axis.axhline(limits.max_tool_speed / MM, color="black", linestyle="--")
+        if title.startswith("max distance") and limits.contour_tolerance is not None:
+            axis.axhline(limits.contour_tolerance / MM, color="black", linestyle="--")
+        if title.startswith("duration"):
+            axis.set_ylim(min(0.95, min(values) - 0.01), max(values) + 0.02)
+    figure.suptitle(f"{problem.name}: headline figures (dashed: the limit)")
+    return figure

@@ -1,0 +1,119 @@
+"""The planner comparison: one row per planner from the one evaluator, failures as rows,
+the files and figures the command line writes, and the experiment scripts."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import spm_opt as so
+from spm_opt.cli import main
+from spm_opt.comparison import COLUMNS
+from spm_opt.planners import PLANNERS
+
+ROOT = Path(__file__).resolve().parents[1]
+FAST = ["cubic", "ruckig", "toppra"]
+
+
+class FailingPlanner:
+    name = "always-fails"
+
+    def plan(self, problem):
+        raise so.PlanningError("always-fails: no plan, on purpose")
+
+
+@pytest.fixture
+def failing_planner(monkeypatch):
+    monkeypatch.setitem(PLANNERS, FailingPlanner.name, FailingPlanner())
+    return FailingPlanner.name
+
+
+def test_one_row_per_planner_with_the_evaluators_figures(paper_problem):
+    table = so.compare(paper_problem, FAST)
+    assert list(table.columns) == list(COLUMNS)
+    assert table["planner"].tolist() == FAST
+    for name, row in table.set_index("planner").iterrows():
+        report = so.evaluate(paper_problem, so.plan(paper_problem, name))
+        assert row["duration_s"] == pytest.approx(report.duration_s)
+        assert row["max_contour_deviation_mm"] == pytest.approx(report.max_contour_deviation_mm)
+        assert row["effort_n2m2s"] == pytest.approx(report.effort_n2m2s, rel=1e-9)
+        assert row["peak_joint_speed_over_limit"] == pytest.approx(
+            max(report.peak_joint_speed_rad_s) / report.joint_speed_limit_rad_s
+        )
+    cubic = table.set_index("planner").loc["cubic"]
+    assert cubic["status"] == "4 violation(s)" and "contour deviation" in cubic["violations"]
+    assert table.set_index("planner").loc["toppra", "status"] == "ok"
+
+
+def test_a_failing_planner_is_a_row_and_the_others_still_run(paper_problem, failing_planner):
+    table = so.compare(paper_problem, ["cubic", failing_planner, "ruckig"]).set_index("planner")
+    failed = table.loc[failing_planner]
+    assert failed["status"] == "failed"
+    assert failed["error"] == "PlanningError: always-fails: no plan, on purpose"
+    assert np.isnan(failed["duration_s"])
+    assert table.loc["ruckig", "duration_s"] > 0 and table.loc["cubic", "duration_s"] == 40.0
+
+
+def test_unknown_planner_is_refused_before_anything_runs(paper_problem):
+    with pytest.raises(so.UnknownPlannerError, match=r"planner = 'fastest': unknown"):
+        so.compare(paper_problem, ["cubic", "fastest"])
+
+
+def test_command_writes_the_table_the_summary_and_the_figures(tmp_path, failing_planner, capsys):
+    out = tmp_path / "comparison"
+    problem = ROOT / "problems" / "craniotomy_bone_flap.toml"
+    planners = f"cubic,ruckig,{failing_planner}"
+    status = main(["compare", str(problem), "--planners", planners, "--out", str(out)])
+    assert status == 0
+    figures = ["cuts.png", "headline.png", "joints.png", "tool_speed.png", "torques.png"]
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["comparison.csv", "comparison.md", *figures]
+    )
+    for name in figures:
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = (out / "comparison.md").read_text()
+    above_the_table = summary.split("| planner |")[0]
+    stated = (
+        "craniotomy_bone_flap",
+        "A1 → A2 → A3 → A4 → A1",
+        "tool speed on the skull: 3 mm/s",
+        "contour tolerance: 0.1 mm",
+        "37.53 s",
+    )
+    assert all(text in above_the_table for text in stated)
+    assert f"**{failing_planner}** failed: PlanningError" in summary
+    progress = capsys.readouterr().err
+    assert "[3/3] always-fails: PlanningError" in progress
+
+
+def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "comparison"
+    problem = ROOT / "problems" / "craniotomy_bone_flap.toml"
+    assert main(["compare", str(problem), "--planners", "cubic,fast", "--out", str(out)]) == 2
+    assert "planner = 'fast': unknown" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["compare_planners.py", "--planners", "cubic,ruckig"],
+        ["reproduce_paper.py"],
+        ["calibrate_prototype.py"],
+    ],
+    ids=lambda c: c[0],
+)
+def test_every_experiment_script_runs(tmp_path, command):
+    """Each script in experiments/ in a small setting (every script must be listed here)."""
+    listed = {"compare_planners.py", "reproduce_paper.py", "calibrate_prototype.py"}
+    assert {p.name for p in (ROOT / "experiments").glob("*.py")} == listed
+    out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
+    script = [sys.executable, str(ROOT / "experiments" / command[0]), *command[1:], *out]
+    result = subprocess.run(script, capture_output=True, text=True, timeout=600, check=False)
+    assert result.returncode == 0, result.stderr
+    if command[0] == "compare_planners.py":
+        table = (tmp_path / "all_problems.csv").read_text().splitlines()
+        problems = len(list((ROOT / "problems").glob("*.toml")))
+        assert len(table) == 1 + 2 * problems
