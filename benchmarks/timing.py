@@ -39,14 +39,16 @@ def throughput_table(
             f"{r['ratio_to_reference']:9.1f}x"
         )
     print(f"(ratio: against '{reference}', measured in the same run)")
+    write_results(name, {"reference": reference, "results": results})
+    return results
+
+
+def write_results(name: str, document: dict) -> Path:
+    """Write ``document``, after the machine and Python version, to
+    ``benchmarks/results/<name>.json`` and say so."""
     out = ROOT / "benchmarks" / "results" / f"{name}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    document = {
-        "machine": platform.platform(),
-        "python": platform.python_version(),
-        "reference": reference,
-        "results": results,
-    }
+    document = {"machine": platform.platform(), "python": platform.python_version(), **document}
     out.write_text(json.dumps(document, indent=2) + "\n")
     print(f"written {out.relative_to(ROOT)}")
-    return results
+    return out
