@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import time
-from typing import Protocol
+from typing import Any, Protocol, TypeVar
 
 from spm_opt.errors import InputError, UnknownPlannerError
 from spm_opt.problem import Problem
@@ -47,6 +49,41 @@ def planner_options(problem: Problem, name: str, allowed: tuple[str, ...] = ()) 
             known = ", ".join(allowed) or "none"
             raise InputError(f"{where}planner.{name}.{key}: unknown key (allowed: {known})")
     return options
+
+
+Settings = TypeVar("Settings")
+
+
+def settings_from_options(
+    planner: str,
+    defaults: Settings,
+    options: dict[str, Any],
+    ranges: dict[str, tuple[float, float]],
+    choices: dict[str, tuple[str, ...]] | None = None,
+) -> Settings:
+    """``defaults`` (a frozen dataclass) with the values of a ``[planner.NAME]`` table: each
+    one of its ``choices``, or a finite number in its range (an integer where the default
+    is one); a one-line InputError naming the key and what is allowed otherwise."""
+    values: dict[str, Any] = {}
+    for key, value in options.items():
+        where = f"planner.{planner}.{key} = {value!r}"
+        if choices and key in choices:
+            if value not in choices[key]:
+                raise InputError(f"{where}: expected one of {', '.join(choices[key])}")
+            values[key] = value
+            continue
+        low, high = ranges[key]
+        integer = isinstance(getattr(defaults, key), int)
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not (math.isfinite(value) and low <= value <= high)
+            or (integer and value != int(value))
+        ):
+            kind = "an integer" if integer else "a number"
+            raise InputError(f"{where}: expected {kind} in [{low:g}, {high:g}]")
+        values[key] = int(value) if integer else float(value)
+    return dataclasses.replace(defaults, **values)  # type: ignore[type-var]
 
 
 def plan(problem: Problem, planner: str = "cubic") -> Trajectory:

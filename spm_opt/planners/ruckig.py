@@ -45,7 +45,6 @@ pieces exactly, which the :class:`Trajectory` holds as they are (no resampling).
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -54,10 +53,10 @@ import numpy as np
 import ruckig
 from scipy.interpolate import PPoly
 
-from spm_opt.errors import InputError, PlanningError
+from spm_opt.errors import PlanningError
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.planners.registry import planner_options, register
+from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
 
@@ -105,27 +104,8 @@ class RuckigSettings:
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> RuckigSettings:
         """Settings from a ``[planner.ruckig]`` table; one-line errors for bad values."""
-        values: dict[str, Any] = {}
-        for key, value in options.items():
-            if key == "via_points":
-                if value not in VIA_POINTS:
-                    raise InputError(
-                        f"planner.ruckig.via_points = {value!r}: expected one of "
-                        f"{', '.join(VIA_POINTS)}"
-                    )
-                values[key] = value
-                continue
-            low, high = cls._RANGES[key]
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | float)
-                or not (low <= value <= high and math.isfinite(value))
-            ):
-                raise InputError(
-                    f"planner.ruckig.{key} = {value!r}: expected a number in [{low:g}, {high:g}]"
-                )
-            values[key] = float(value)
-        return cls(**values)
+        choices = {"via_points": VIA_POINTS}
+        return settings_from_options("ruckig", cls(), options, cls._RANGES, choices)
 
 
 OPTION_KEYS = tuple(f.name for f in dataclasses.fields(RuckigSettings))

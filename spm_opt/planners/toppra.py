@@ -61,10 +61,10 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import CubicSpline, PPoly
 
-from spm_opt.errors import InputError, PlanningError
+from spm_opt.errors import PlanningError
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import MM
-from spm_opt.planners.registry import planner_options, register
+from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
 
@@ -115,22 +115,7 @@ class ToppraSettings:
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> ToppraSettings:
         """Settings from a ``[planner.toppra]`` table over the defaults; one-line errors."""
-        values: dict[str, Any] = {}
-        for key, value in options.items():
-            low, high = cls._RANGES[key]
-            integer = isinstance(getattr(cls, key), int)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | float)
-                or not (math.isfinite(value) and low <= value <= high)
-                or (integer and value != int(value))
-            ):
-                kind = "an integer" if integer else "a number"
-                raise InputError(
-                    f"planner.toppra.{key} = {value!r}: expected {kind} in [{low:g}, {high:g}]"
-                )
-            values[key] = int(value) if integer else float(value)
-        return cls(**values)
+        return settings_from_options("toppra", cls(), options, cls._RANGES)
 
 
 OPTION_KEYS = tuple(f.name for f in dataclasses.fields(ToppraSettings))
