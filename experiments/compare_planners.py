@@ -10,13 +10,17 @@ every planner on every problem, one row each.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import pandas as pd
 
 import spm_opt as so
-from spm_opt.comparison import comparison_table, run_planners, write_comparison
+from spm_opt.comparison import (
+    comparison_table,
+    print_progress,
+    run_planners,
+    write_comparison,
+)
 from spm_opt.files import write_atomically
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,15 +50,6 @@ def markdown_table(frame: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
-def report_progress(problem: str):
-    def progress(index: int, count: int, name: str, outcome: so.comparison.Outcome | None) -> None:
-        if outcome is not None:
-            result = outcome.error or f"{len(outcome.report.violations)} violation(s)"
-            print(f"{problem} [{index}/{count}] {name}: {result}", file=sys.stderr, flush=True)
-
-    return progress
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--planners", default=None, help="comma-separated names (default: all)")
@@ -64,7 +59,7 @@ def main() -> None:
     tables = []
     for path in sorted((ROOT / "problems").glob("*.toml")):
         problem = so.load_problem(path)
-        outcomes = run_planners(problem, names, report_progress(problem.name))
+        outcomes = run_planners(problem, names, print_progress(f"{problem.name} "))
         write_comparison(problem, outcomes, args.out / problem.name)
         tables.append(comparison_table(outcomes).assign(problem=problem.name))
     combined = pd.concat(tables, ignore_index=True)

@@ -16,7 +16,6 @@ from itertools import pairwise
 
 import numpy as np
 
-from spm_opt.model import kinematics
 from spm_opt.problem import Problem
 
 SAMPLES_PER_SEGMENT = 2001
@@ -25,12 +24,10 @@ SAMPLES_PER_SEGMENT = 2001
 def segment_lower_bounds(problem: Problem, samples: int = SAMPLES_PER_SEGMENT) -> np.ndarray:
     """Shortest time, s, for each segment between consecutive landmark visits (segments,)."""
     contour, limits = problem.contour, problem.limits
-    r_u = problem.robot.upper_platform_radius
     bounds = []
     for start, end in pairwise(contour.landmark_arc_lengths):
         s = np.linspace(start, end, samples)
-        points = contour.point_at(s)
-        q = kinematics.inverse_kinematics(kinematics.project_landmarks(points, r_u))
+        q = problem.contour_angles(s)
         joint_pace = np.max(np.abs(np.gradient(q, s, axis=0)), axis=1) / limits.max_joint_speed
         pace = joint_pace
         if limits.max_tool_speed is not None:

@@ -106,7 +106,7 @@ def _evaluate(args: argparse.Namespace) -> None:
 
 
 def _compare(args: argparse.Namespace) -> None:
-    from spm_opt.comparison import Outcome, run_planners, write_comparison
+    from spm_opt.comparison import print_progress, run_planners, write_comparison
     from spm_opt.problem import load_problem
 
     names = None
@@ -115,22 +115,7 @@ def _compare(args: argparse.Namespace) -> None:
         if not names:
             raise InputError(f"--planners {args.planners!r}: expected comma-separated names")
     problem = load_problem(args.problem)
-
-    def progress(index: int, count: int, name: str, outcome: Outcome | None) -> None:
-        if outcome is None:
-            print(f"[{index}/{count}] {name} ...", file=sys.stderr, flush=True)
-        else:
-            result = outcome.error or (
-                f"{outcome.trajectory.duration:.2f} s plan, "  # type: ignore[union-attr]
-                f"{len(outcome.report.violations)} violation(s)"  # type: ignore[union-attr]
-            )
-            print(
-                f"[{index}/{count}] {name}: {result} ({outcome.wall_time_s:.1f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
-
-    outcomes = run_planners(problem, names, progress)
+    outcomes = run_planners(problem, names, print_progress())
     for path in write_comparison(problem, outcomes, args.out):
         print(path)
 

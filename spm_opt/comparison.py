@@ -8,6 +8,7 @@ A planner that fails gets a row with its error; the others still run.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -102,6 +103,24 @@ class Outcome:
 Progress = Callable[[int, int, str, "Outcome | None"], None]
 """Called before each planner (outcome None) and after it: (index from 1, count, name,
 outcome)."""
+
+
+def print_progress(prefix: str = "") -> Progress:
+    """A progress callback that prints each planner's start and result to stderr, each
+    line after ``prefix``."""
+
+    def progress(index: int, count: int, name: str, outcome: Outcome | None) -> None:
+        if outcome is None:
+            line = f"[{index}/{count}] {name} ..."
+        else:
+            result = outcome.error or (
+                f"{outcome.trajectory.duration:.2f} s plan, "  # type: ignore[union-attr]
+                f"{len(outcome.report.violations)} violation(s)"  # type: ignore[union-attr]
+            )
+            line = f"[{index}/{count}] {name}: {result} ({outcome.wall_time_s:.1f} s)"
+        print(prefix + line, file=sys.stderr, flush=True)
+
+    return progress
 
 
 def run_planners(

@@ -42,8 +42,7 @@ def _samples(outcome: Outcome) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
 def _cut_progress(problem: Problem, outcome: Outcome) -> tuple[np.ndarray, np.ndarray]:
     """Distance cut so far (N,), mm, and the tool speed (N,), mm/s, on the drawing grid."""
     t, q, qd, _ = _samples(outcome)
-    rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
-    speed = problem.contour.tool_speed(kinematics.forward_kinematics(q, 1.0), rates) / MM
+    speed = problem.contour.joint_tool_speed(q, qd) / MM
     distance = np.concatenate([[0.0], np.cumsum(np.diff(t) * (speed[1:] + speed[:-1]) / 2)])
     return distance, speed
 
@@ -69,11 +68,9 @@ def torques(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
     """Actuator torques (N·m, the model with exact friction) over time (s)."""
     figure = _figure((10, 6))
     axes = figure.subplots(2, 1, sharex=True)
-    robot = problem.robot
     for index, outcome in enumerate(outcomes):
         t, q, qd, qdd = _samples(outcome)
-        load = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
-        torque = robot.actuator.drive_torque(load, qd, qdd)
+        torque = dynamics.actuator_torque(problem.robot, q, qd, qdd)
         for joint, axis in enumerate(axes):
             axis.plot(t, torque[:, joint], color=_colour(index), label=outcome.planner)
     for joint, axis in enumerate(axes):

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spm_opt.model import kinematics
+
 _GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(16)
 
 
@@ -153,6 +155,14 @@ class Contour:
         """
         near = self.nearest(directions)
         return 2.0 * near.radius * np.sin(near.offset / 2.0)
+
+    def joint_tool_speed(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Speed (N,), m/s, of the cut point for joint angles q (N, 2), rad, moving at
+        q̇ (N, 2) or (2,), rad/s (see :meth:`tool_speed`)."""
+        q = np.asarray(q, dtype=float)
+        jacobian = kinematics.platform_jacobian(q, 1.0)
+        rates = np.einsum("nij,nj->ni", jacobian, np.broadcast_to(qd, q.shape))
+        return self.tool_speed(kinematics.forward_kinematics(q, 1.0), rates)
 
     def tool_speed(self, directions: np.ndarray, direction_rates: np.ndarray) -> np.ndarray:
         """Speed (N,), m/s, of the cut point for unit directions p (N, 3) moving at ṗ (N, 3).

@@ -143,11 +143,9 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     jerk = trajectory.jerk(t)
     directions = kinematics.forward_kinematics(q, 1.0)
     deviation = contour.deviation(directions)
-    rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
-    tool_speed = contour.tool_speed(directions, rates)
+    tool_speed = contour.joint_tool_speed(q, qd)
     margins = kinematics.singularity_margins(q)
-    load = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
-    torque = robot.actuator.drive_torque(load, qd, qdd)
+    torque = dynamics.actuator_torque(robot, q, qd, qdd)
     continuous_torque = robot.actuator.continuous_torque_nm
     torque_limit = problem.max_joint_torque
     peak_torque = np.max(np.abs(torque), axis=0)

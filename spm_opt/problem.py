@@ -181,6 +181,13 @@ class Problem:
         """The planned cut through the landmarks."""
         return Contour(self.landmarks, self.closed)
 
+    def contour_angles(self, s: np.ndarray) -> np.ndarray:
+        """Joint angles (N, 2), rad, that put the cut at arc lengths s (N,), m, along the
+        contour (the contour's points projected onto the platform sphere, Eqs. 1–2)."""
+        points = self.contour.point_at(np.asarray(s, dtype=float))
+        radius = self.robot.upper_platform_radius
+        return kinematics.inverse_kinematics(kinematics.project_landmarks(points, radius))
+
 
 def load_problem(path: str | Path) -> Problem:
     """Read and validate a problem file; its ``robot`` path is relative to the file."""

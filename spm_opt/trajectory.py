@@ -201,10 +201,7 @@ class Trajectory:
 
     def tool_speed(self, contour: Contour, t: np.ndarray) -> np.ndarray:
         """Speed of the cut point across the skull at times t: (N,), m/s."""
-        q, qd = self.position(t), self.velocity(t)
-        directions = kinematics.forward_kinematics(q, 1.0)
-        rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), qd)
-        return contour.tool_speed(directions, rates)
+        return contour.joint_tool_speed(self.position(t), self.velocity(t))
 
     # --- files --------------------------------------------------------------------
 

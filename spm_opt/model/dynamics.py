@@ -294,6 +294,13 @@ def inverse_dynamics(
     return frictionless
 
 
+def actuator_torque(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """What the actuators deliver (N, 2), N·m: the model's torques with exact friction,
+    through the actuator's rotor inertia and gear efficiency (when the robot has them)."""
+    load = inverse_dynamics(robot, q, qd, qdd, friction=True, exact=True)
+    return robot.actuator.drive_torque(load, qd, qdd)
+
+
 def friction_torque(
     robot: Robot, q: np.ndarray, qd: np.ndarray, *, exact: bool = True
 ) -> np.ndarray:

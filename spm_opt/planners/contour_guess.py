@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from spm_opt.model import kinematics
 from spm_opt.problem import Problem
 
 _STEP = 1e-6
@@ -27,11 +26,8 @@ def _fraction(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _angles(problem: Problem, segment: int, fraction: np.ndarray) -> np.ndarray:
-    contour = problem.contour
-    start, end = contour.landmark_arc_lengths[segment : segment + 2]
-    points = contour.point_at(start + np.clip(fraction, 0.0, 1.0) * (end - start))
-    r_u = problem.robot.upper_platform_radius
-    return kinematics.inverse_kinematics(kinematics.project_landmarks(points, r_u))
+    start, end = problem.contour.landmark_arc_lengths[segment : segment + 2]
+    return problem.contour_angles(start + np.clip(fraction, 0.0, 1.0) * (end - start))
 
 
 def segment_motion(

@@ -54,7 +54,6 @@ import ruckig
 from scipy.interpolate import PPoly
 
 from spm_opt.errors import PlanningError
-from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
@@ -158,10 +157,7 @@ def line_speed_caps(problem: Problem) -> np.ndarray:
     for start, step in zip(waypoints[:-1], np.diff(waypoints, axis=0), strict=True):
         rate = limits.max_joint_speed / np.max(np.abs(step))  # line parameter per s
         if limits.max_tool_speed is not None:
-            q = start + s * step
-            directions = kinematics.forward_kinematics(q, 1.0)
-            direction_rates = kinematics.platform_jacobian(q, 1.0) @ step
-            gain = np.max(contour.tool_speed(directions, direction_rates))  # m per unit s
+            gain = np.max(contour.joint_tool_speed(start + s * step, step))  # m per unit s
             rate = min(rate, limits.max_tool_speed / gain)
         caps.append(rate * np.abs(step))
     return np.array(caps)

@@ -62,7 +62,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PPoly
 
 from spm_opt.errors import PlanningError
-from spm_opt.model import dynamics, kinematics
+from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
@@ -144,10 +144,7 @@ def _segment(problem: Problem, index: int, samples: int) -> _Segment:
     contour, names = problem.contour, problem.visit_names
     start, end = contour.landmark_arc_lengths[index : index + 2]
     s = np.linspace(0.0, end - start, samples)
-    points = contour.point_at(start + s)
-    q = kinematics.inverse_kinematics(
-        kinematics.project_landmarks(points, problem.robot.upper_platform_radius)
-    )
+    q = problem.contour_angles(start + s)
     q[0], q[-1] = problem.waypoint_angles[index], problem.waypoint_angles[index + 1]
     return _Segment(f"{names[index]}→{names[index + 1]}", CubicSpline(s / MM, q))
 
@@ -226,8 +223,7 @@ def _speed_bound(problem: Problem, q: np.ndarray, dq: np.ndarray, shares: _Share
     limits = problem.limits
     pace = np.max(np.abs(dq), axis=1) / (limits.max_joint_speed * shares.joint_speed)  # s/mm
     if limits.max_tool_speed is not None:
-        rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(q, 1.0), dq)
-        stretch = problem.contour.tool_speed(kinematics.forward_kinematics(q, 1.0), rates) / MM
+        stretch = problem.contour.joint_tool_speed(q, dq) / MM
         pace = np.maximum(pace, stretch / (limits.max_tool_speed / MM * shares.tool_speed))
     return 1.0 / pace**2
 
@@ -513,19 +509,13 @@ def _excess(problem: Problem, piece: _Piece) -> dict[str, float]:
     name: peak / limit. Torques from the model with exact friction, as the actuators
     deliver them."""
     limits, robot = problem.limits, problem.robot
-    load = dynamics.inverse_dynamics(robot, piece.q, piece.qd, piece.qdd)
+    torque = dynamics.actuator_torque(robot, piece.q, piece.qd, piece.qdd)
     peaks = {
         "joint_speed": (np.max(np.abs(piece.qd)) / limits.max_joint_speed, _SPEED_SLACK),
-        "torque": (
-            np.max(np.abs(robot.actuator.drive_torque(load, piece.qd, piece.qdd)))
-            / problem.max_joint_torque,
-            0.0,
-        ),
+        "torque": (np.max(np.abs(torque)) / problem.max_joint_torque, 0.0),
     }
     if limits.max_tool_speed is not None:
-        directions = kinematics.forward_kinematics(piece.q, 1.0)
-        rates = np.einsum("nij,nj->ni", kinematics.platform_jacobian(piece.q, 1.0), piece.qd)
-        speed = problem.contour.tool_speed(directions, rates)
+        speed = problem.contour.joint_tool_speed(piece.q, piece.qd)
         peaks["tool_speed"] = (np.max(speed) / limits.max_tool_speed, _SPEED_SLACK)
     if limits.max_joint_acceleration is not None:
         peaks["acceleration"] = (np.max(np.abs(piece.qdd)) / limits.max_joint_acceleration, 0.0)
