@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 
 def write_atomically(contents: dict[Path, str | bytes]) -> None:
@@ -29,3 +32,14 @@ def write_atomically(contents: dict[Path, str | bytes]) -> None:
         for path in placed:
             path.unlink(missing_ok=True)
         raise
+
+
+def json_default(value: Any) -> Any:
+    """``json.dumps``'s ``default`` for numpy arrays and scalars and paths."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")

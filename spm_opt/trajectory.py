@@ -24,7 +24,7 @@ from scipy.interpolate import BPoly, PPoly
 
 from spm_opt.contour import Contour
 from spm_opt.errors import InputError
-from spm_opt.files import write_atomically
+from spm_opt.files import json_default, write_atomically
 from spm_opt.model import kinematics
 
 COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "qdd1", "qdd2")
@@ -227,7 +227,7 @@ class Trajectory:
         }
         return {
             path: "\n".join(lines) + "\n",
-            sidecar_path(path): json.dumps(sidecar, indent=2, default=_jsonable) + "\n",
+            sidecar_path(path): json.dumps(sidecar, indent=2, default=json_default) + "\n",
         }
 
     @classmethod
@@ -262,16 +262,6 @@ def _check_landmark_times(sidecar: Path, times: Any) -> None:
     if not valid:
         shown = json.dumps(times)[:60]
         raise InputError(f"{sidecar}: landmark_times_s = {shown}: expected a list of times in s")
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"cannot write {type(value).__name__} to JSON")
 
 
 def _read_samples(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

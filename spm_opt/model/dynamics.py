@@ -113,6 +113,7 @@ class _Model:
     multipliers: ca.Function  # -> λ frictionless (3), λ_f smooth (3), λ_f exact (3)
     energy: ca.Function  # (q, qd, parameters) -> kinetic, potential
     friction_forces: ca.Function  # (q, qd, parameters) -> F_fu (3), F_fl (3), exact, μ as given
+    plant: ca.Function  # (q, qd, parameters) -> M (4), bias (2), slide map A (4), friction C (4)
 
 
 @cache
@@ -184,6 +185,8 @@ def _model() -> _Model:
         return v / ca.sqrt(v**2 + par.smoothing**2)
 
     exact_forces = friction(ca.sign(slide_upper), ca.sign(slide_lower))
+    signs = ca.SX.sym("signs", 2)
+    signed_forces = friction(signs[0], signs[1])
     smooth_forces = friction(smooth_sign(slide_upper), smooth_sign(slide_lower))
 
     # Euler–Lagrange expressions E = d/dt ∂L/∂ṗ − ∂L/∂p along p(t)
@@ -207,6 +210,7 @@ def _model() -> _Model:
     force_exact = exact_forces[0] + (r_l / r_u) * exact_forces[1]
     lam_smooth, tau_smooth = solve(-force_smooth)
     lam_exact, tau_exact = solve(-force_exact)
+    _, tau_signed = solve(-(signed_forces[0] + (r_l / r_u) * signed_forces[1]))
 
     # substitute the kinematics: B = r_u b(θ), Ḃ = J θ̇, B̈ = J θ̈ + J̇ θ̇
     b_of_q = r_u * _column(kinematics.direction(q[0], q[1]))
@@ -247,7 +251,25 @@ def _model() -> _Model:
         ["q", "qd", "parameters"],
         ["upper", "lower"],
     )
-    return _Model(torque, multipliers, energy, friction_forces)
+    # for simulation: τ = M q̈ + bias + C σ with σ ∈ sign(A q̇), the slides' signs
+    tau_joint, slide_rates, friction_map = in_joint_space(
+        tau_0, ca.vertcat(slide_upper, slide_lower), ca.jacobian(tau_signed, signs)
+    )
+    mass = ca.jacobian(tau_joint, qdd)
+    bias = ca.substitute(tau_joint, qdd, ca.DM.zeros(2))
+    slide_map = ca.jacobian(slide_rates, qd)
+
+    def flat(matrix: ca.SX) -> ca.SX:
+        return ca.reshape(matrix.T, -1, 1)
+
+    plant = ca.Function(
+        "plant",
+        [q, qd, par.vector],
+        [flat(mass), bias, flat(slide_map), flat(friction_map)],
+        ["q", "qd", "parameters"],
+        ["mass", "bias", "slide_map", "friction_map"],
+    )
+    return _Model(torque, multipliers, energy, friction_forces, plant)
 
 
 @cache
@@ -402,3 +424,36 @@ def friction_forces(robot: Robot, q: np.ndarray, qd: np.ndarray) -> tuple[np.nda
     """Friction forces (Eqs. 21–22) on the upper and lower platforms, each (N, 3), N."""
     upper, lower = _model().friction_forces(*_columns(q, qd), parameter_vector(robot))
     return _rows(upper), _rows(lower)
+
+
+
+class PlantTerms:
+    """The terms a simulator needs at one state (q, q̇), evaluated through a CasADi
+    buffer (about 30 µs a call, no array conversion): the mass matrix M (2, 2), kg·m²;
+    the bias torques (2,), N·m (gravity, Coriolis, centrifugal); the slide map A (2, 2)
+    that gives the platforms' sliding rates A q̇, rad/s; and the friction map C (2, 2),
+    N·m, so that the friction torques are C sign(A q̇)."""
+
+    def __init__(self, robot: Robot) -> None:
+        self._buffer, self._evaluate = _model().plant.buffer()
+        self._q, self._qd = np.zeros(2), np.zeros(2)
+        self._parameters = parameter_vector(robot)
+        self._outputs = [np.zeros(4), np.zeros(2), np.zeros(4), np.zeros(4)]
+        for index, array in enumerate((self._q, self._qd, self._parameters)):
+            self._buffer.set_arg(index, memoryview(array))
+        for index, array in enumerate(self._outputs):
+            self._buffer.set_res(index, memoryview(array))
+
+    def __call__(
+        self, q: np.ndarray, qd: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        self._q[:] = q
+        self._qd[:] = qd
+        self._evaluate()
+        mass, bias, slide_map, friction_map = self._outputs
+        return (
+            mass.reshape(2, 2).copy(),
+            bias.copy(),
+            slide_map.reshape(2, 2).copy(),
+            friction_map.reshape(2, 2).copy(),
+        )
