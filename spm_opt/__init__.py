@@ -6,6 +6,8 @@ for brain surgery.
     trajectory = so.plan(problem, planner="cubic")
     report = so.evaluate(problem, trajectory)
     table = so.compare(problem)  # every planner, one row each (a pandas DataFrame)
+    result = so.execute(trajectory, backend=so.SimulatedRobot(problem.robot,
+                        start_rad=trajectory.position(0.0)), problem=problem, log="run.csv")
 """
 
 import logging
@@ -20,6 +22,7 @@ from spm_opt.errors import (
     UnreachableError,
 )
 from spm_opt.evaluate import Report, Violation, evaluate
+from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_log
 from spm_opt.model.dynamics import inverse_dynamics, mechanical_energy
 from spm_opt.model.params import Robot, load_robot
 from spm_opt.planners import PLANNERS, plan
@@ -35,10 +38,12 @@ __all__ = [
     "Contour",
     "InputError",
     "Limits",
+    "ExecutionSettings",
     "PlanningError",
     "Problem",
     "Report",
     "Robot",
+    "SimulatedRobot",
     "SpmOptError",
     "Trajectory",
     "UnknownPlannerError",
@@ -46,9 +51,11 @@ __all__ = [
     "Violation",
     "compare",
     "evaluate",
+    "execute",
     "inverse_dynamics",
     "mechanical_energy",
     "load_problem",
     "load_robot",
     "plan",
+    "read_log",
 ]

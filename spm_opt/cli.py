@@ -12,6 +12,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+import numpy as np
+
 from spm_opt.errors import InputError, SpmOptError
 
 PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
@@ -61,11 +63,114 @@ def _parser() -> argparse.ArgumentParser:
     )
     compare.add_argument("--out", required=True, type=Path, help="output directory")
 
+    _execute_parser(commands)
+    _emulate_parser(commands)
+
     evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
     evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
     evaluate.add_argument("--json", action="store_true", help="print the report as JSON")
     return parser
+
+
+def _execute_parser(commands: argparse._SubParsersAction) -> None:
+    execute = commands.add_parser(
+        "execute", help="run a trajectory CSV on the simulated robot or the Dynamixel actuators"
+    )
+    execute.add_argument("plan", type=Path, help="trajectory CSV file (spm-opt plan --out)")
+    execute.add_argument(
+        "--problem", required=True, type=Path, help="problem TOML whose robot and limits apply"
+    )
+    execute.add_argument("--backend", required=True, choices=("sim", "dynamixel"))
+    execute.add_argument("--log", required=True, type=Path, help="CSV log to write")
+    execute.add_argument("--port", help="serial device of the actuators (dynamixel)")
+    execute.add_argument("--baud", type=int, default=4_000_000, help="baud rate (dynamixel)")
+    execute.add_argument("--ids", default="1,2", help="actuator ids of theta1,theta2 (dynamixel)")
+    execute.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="loop rate")
+    execute.add_argument(
+        "--approach", action="store_true", help="first move to the plan's start if away from it"
+    )
+    execute.add_argument(
+        "--realtime", action="store_true", help="sim: run on the wall clock (default: fast)"
+    )
+    execute.add_argument(
+        "--start-deg",
+        default=None,
+        metavar="A,B",
+        help="sim: where the simulated robot rests at the start (default: the plan's start)",
+    )
+
+
+def _emulate_parser(commands: argparse._SubParsersAction) -> None:
+    emulate = commands.add_parser(
+        "emulate", help="two emulated L54 actuators on a pseudo-terminal (Protocol 2.0)"
+    )
+    emulate.add_argument(
+        "--problem", default=PAPER_PROBLEM, type=Path, help="problem TOML whose robot is emulated"
+    )
+    emulate.add_argument("--ids", default="1,2", help="actuator ids (default 1,2)")
+    emulate.add_argument("--start-deg", default="0,0", metavar="A,B", help="start angles")
+    emulate.add_argument(
+        "--fault", action="append", default=[], help="inject a fault, e.g. overload:id=1,at=3.0"
+    )
+    emulate.add_argument("--seed", type=int, default=0, help="seed of the current noise")
+
+
+def _pair(text: str, option: str, kind: type) -> tuple:
+    parts = text.split(",")
+    try:
+        values = tuple(kind(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 2 or not all(np.isfinite(values)):
+        raise InputError(f"{option} {text!r}: expected two {kind.__name__} values like 1,2")
+    return values
+
+
+def _execute(args: argparse.Namespace) -> None:
+    from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
+    from spm_opt.problem import load_problem
+    from spm_opt.trajectory import Trajectory
+
+    settings = ExecutionSettings(rate_hz=args.rate, approach=args.approach)
+    problem = load_problem(args.problem)
+    trajectory = Trajectory.from_csv(args.plan)
+    if args.backend == "sim":
+        start = trajectory.position(trajectory.start_time)
+        if args.start_deg is not None:
+            start = np.radians(_pair(args.start_deg, "--start-deg", float))
+        backend = SimulatedRobot(problem.robot, start_rad=start, realtime=args.realtime)
+    else:
+        from spm_opt.execution.dynamixel import DynamixelRobot
+
+        if args.port is None:
+            raise InputError("--port: required with --backend dynamixel (e.g. /dev/ttyUSB0)")
+        ids = _pair(args.ids, "--ids", int)
+        backend = DynamixelRobot(problem.robot.actuator, args.port, args.baud, ids)
+    result = execute(trajectory, backend, problem, args.log, settings)
+    loop = result.statistics
+    print(
+        f"{args.log}: {result.samples} samples, {loop.achieved_rate_hz:.1f} Hz achieved, "
+        f"period error p99 {loop.period_error_p99_ms:.3f} ms, {loop.overruns} overruns"
+    )
+    if not result.completed:
+        at_rest = "at rest" if result.at_rest else "rest not confirmed"
+        raise ExecutionStopped(f"safe stop ({at_rest}): {result.reason}")
+
+
+class ExecutionStopped(Exception):
+    """A run that ended in a safe stop: the command exits with status 1."""
+
+
+def _emulate(args: argparse.Namespace) -> None:
+    from spm_opt.execution.emulator import parse_faults, serve
+    from spm_opt.problem import load_problem
+
+    robot = load_problem(args.problem).robot
+    ids = _pair(args.ids, "--ids", int)
+    start = np.radians(_pair(args.start_deg, "--start-deg", float))
+    faults = parse_faults(args.fault)
+    serve(robot, ids, start, faults, args.seed, announce=lambda device: print(device, flush=True))
 
 
 def _reproduce(args: argparse.Namespace) -> None:
@@ -125,6 +230,8 @@ _COMMANDS = {
     "plan": _plan,
     "compare": _compare,
     "evaluate": _evaluate,
+    "execute": _execute,
+    "emulate": _emulate,
 }
 
 
@@ -136,6 +243,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SpmOptError as error:
         print(f"spm-opt: error: {error}", file=sys.stderr)
         return 2
+    except ExecutionStopped as stopped:
+        print(f"spm-opt: {stopped}", file=sys.stderr)
+        return 1
     except OSError as error:  # an output path that cannot be written: the user can fix it
         where = f"{error.filename}: " if error.filename else ""
         print(f"spm-opt: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)

@@ -1,0 +1,299 @@
+"""The simulated robot: the one model's dynamics under two Dynamixel position controllers.
+
+The plant integrates the Lagrange model of :mod:`spm_opt.model.dynamics`,
+τ = M(q) q̈ + bias(q, q̇) + C(q) σ with σ ∈ sign(A(q) q̇), where A q̇ are the rates at
+which the platforms slide on their rails and C = Aᵀ diag(F) holds their Coulomb friction
+(Eqs. 20–22, exact sign). Sticking is handled exactly: each step is the implicit
+(Moreau) time step, the unique minimiser of a convex function of the new joint rates, so a
+platform whose drive cannot overcome its friction stays at rest instead of chattering.
+
+Each actuator runs the Dynamixel PRO's integrated position controller as the reference
+describes it (the paper's Fig. 18): a P position loop gives a rate command, limited by
+the Velocity Limit; a PI velocity loop turns it into a current command, limited by the
+Torque Limit (a current limit); the actuator's current map gives the torque. The
+firmware's scaling of its gain units to physical units is not published: the factors in
+:class:`PlantSettings` are assumptions, chosen for this robot's inertia (about
+0.005 kg·m² per joint): with the default gains (position P 32, velocity P 256, velocity
+I 16) the position loop has a 32 1/s bandwidth (a 5 mrad lag at 0.17 rad/s) and the
+velocity loop about 30 Hz. The anti-windup of the firmware (a gain the user cannot set)
+is modelled as conditional integration: the integrator holds while the current saturates.
+The velocity loop's proportional and integral terms are integrated implicitly, so the
+step is stable at any gain.
+
+An actuator whose torque is off is held by its 502:1 gear train (which the load cannot
+back-drive): its joint stays where it is. Sensors: Present Position quantised to the
+encoder's 361,384 pulse/rev, Present Velocity to its 0.00199234 rpm unit, Present Current
+to its 16.11 mA unit after seeded Gaussian noise.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from spm_opt.model import dynamics
+from spm_opt.model.params import Robot
+
+DEFAULT_POSITION_P_GAIN = 32
+DEFAULT_VELOCITY_P_GAIN = 256
+DEFAULT_VELOCITY_I_GAIN = 16
+"""The control table's default gains (addresses 594, 588, 586)."""
+
+OVERLOAD_BIT = 5
+"""Hardware Error Status bit of an overload."""
+
+
+@dataclass(frozen=True)
+class PlantSettings:
+    """Assumptions of the simulated plant (SI unless the name says otherwise).
+
+    Attributes
+    ----------
+    step_s : float, s
+        Internal integration step (1 ms: a 1 kHz plant).
+    position_gain_per_unit : float, 1/s per unit of Position P Gain
+    velocity_p_gain_per_unit : float, N·m/(rad/s) per unit of Velocity P Gain
+    velocity_i_gain_per_unit : float, N·m/rad per unit of Velocity I Gain
+    current_noise_a : float, A
+        Standard deviation of the noise on Present Current (before quantisation).
+    moving_threshold_rad_s : float, rad/s
+        Speed above which the actuator reports Moving.
+    seed : int
+        Seed of the current noise.
+    """
+
+    step_s: float = 1e-3
+    position_gain_per_unit: float = 1.0
+    velocity_p_gain_per_unit: float = 3.7e-3
+    velocity_i_gain_per_unit: float = 2.5
+    current_noise_a: float = 0.008
+    moving_threshold_rad_s: float = 0.01
+    seed: int = 0
+
+
+class DynamixelPlant:
+    """Two actuators and the robot, integrated in steps of ``settings.step_s``.
+
+    Per-joint arrays (index 0: θ1, index 1: θ2) mirror the control-table items they model
+    and may be written element by element: ``goal_position_rad``, ``velocity_limit_rad_s``,
+    ``current_limit_a``, the gains (control-table units), ``encoder_stuck``.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        settings: PlantSettings | None = None,
+        start_rad: np.ndarray | None = None,
+    ) -> None:
+        self.robot = robot
+        self.settings = settings or PlantSettings()
+        actuator = robot.actuator
+        self._actuator = actuator
+        self._terms = dynamics.PlantTerms(robot)
+        self._rng = np.random.default_rng(self.settings.seed)
+        start = np.zeros(2) if start_rad is None else np.asarray(start_rad, dtype=float)
+        self.time_s = 0.0
+        self.position_rad = start.copy()
+        self.velocity_rad_s = np.zeros(2)
+        self.current_a = np.zeros(2)
+        self._integral = np.zeros(2)
+        self.goal_position_rad = start.copy()
+        self.torque_enabled = np.zeros(2, dtype=bool)
+        self.velocity_limit_rad_s = np.full(2, actuator.rate(8000))
+        self.current_limit_a = np.full(2, actuator.continuous_current_a * 1.5)
+        self.position_p_gain = np.full(2, DEFAULT_POSITION_P_GAIN, dtype=np.int64)
+        self.velocity_p_gain = np.full(2, DEFAULT_VELOCITY_P_GAIN, dtype=np.int64)
+        self.velocity_i_gain = np.full(2, DEFAULT_VELOCITY_I_GAIN, dtype=np.int64)
+        self.hardware_error = np.zeros(2, dtype=np.int64)
+        self.encoder_stuck = np.zeros(2, dtype=bool)
+        self._reported_pulses = actuator.pulses(start)
+
+    # ----------------------------------------------------------------- commands
+    def enable_torque(self, joint: int, on: bool) -> None:
+        """Torque Enable: switching on holds the present position (goal := present)."""
+        if on and not self.torque_enabled[joint]:
+            self.goal_position_rad[joint] = self.position_rad[joint]
+            self._integral[joint] = 0.0
+        self.torque_enabled[joint] = bool(on) and self.hardware_error[joint] == 0
+
+    def trigger_hardware_error(self, joint: int, bit: int) -> None:
+        """Set a Hardware Error Status bit; as the firmware does, torque goes off."""
+        self.hardware_error[joint] |= 1 << bit
+        self.torque_enabled[joint] = False
+
+    def reboot(self, joint: int) -> None:
+        """Clear the hardware error; torque is off after a reboot."""
+        self.hardware_error[joint] = 0
+        self.torque_enabled[joint] = False
+
+    # ------------------------------------------------------------------ sensors
+    def present_position_pulses(self) -> np.ndarray:
+        """Present Position, pulses (signed); frozen where the encoder is stuck."""
+        live = self._actuator.pulses(self.position_rad)
+        self._reported_pulses = np.where(self.encoder_stuck, self._reported_pulses, live)
+        return self._reported_pulses.copy()
+
+    def present_velocity_units(self) -> np.ndarray:
+        """Present Velocity in units of 0.00199234 rpm (signed)."""
+        return self._actuator.velocity_units(self.velocity_rad_s)
+
+    def present_current_units(self) -> np.ndarray:
+        """Present Current in units of 16.11 mA (signed), with the seeded noise."""
+        noise = self._rng.normal(0.0, self.settings.current_noise_a, 2)
+        return self._actuator.current_units(self.current_a + noise)
+
+    def moving(self) -> np.ndarray:
+        """Moving flags: joints turning faster than the threshold."""
+        return np.abs(self.velocity_rad_s) > self.settings.moving_threshold_rad_s
+
+    # -------------------------------------------------------------- integration
+    def advance_to(self, time_s: float) -> None:
+        """Integrate in whole internal steps up to ``time_s`` (no-op if not later)."""
+        steps = int(np.floor((time_s - self.time_s) / self.settings.step_s + 1e-9))
+        for _ in range(max(steps, 0)):
+            self._step()
+
+    def _step(self) -> None:
+        # plain floats: on two joints, numpy's per-call overhead would cost ten times more
+        s, dt = self.settings, self.settings.step_s
+        mass, bias, slide_map, friction = self._terms(self.position_rad, self.velocity_rad_s)
+        (m00, m01), (m10, m11) = mass.tolist()
+        (a00, a01), (a10, a11) = slide_map.tolist()
+        (c00, c01), (c10, c11) = friction.tolist()
+        det = a00 * a11 - a01 * a10
+        # C = Aᵀ diag(F): the friction torque of each slide, times Δt
+        thresholds = (dt * (a11 * c00 - a10 * c10) / det, dt * (a00 * c11 - a01 * c01) / det)
+        problem = _StepProblem(((m00, m01), (m10, m11)), ((a00, a01), (a10, a11)), thresholds, dt)
+        enabled = [bool(e) for e in self.torque_enabled]
+        q, v = self.position_rad.tolist(), self.velocity_rad_s.tolist()
+        bias_torque = bias.tolist()
+        command, gain, held = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
+        for j in range(2):
+            if enabled[j]:
+                limit = float(self.velocity_limit_rad_s[j])
+                kp = s.position_gain_per_unit * float(self.position_p_gain[j])
+                ki = s.velocity_i_gain_per_unit * float(self.velocity_i_gain[j])
+                command[j] = min(max(kp * (float(self.goal_position_rad[j]) - q[j]), -limit), limit)
+                # τ = K (v_cmd − v⁺) + Ki z, the integral taken at the end of the step
+                gain[j] = s.velocity_p_gain_per_unit * float(self.velocity_p_gain[j]) + ki * dt
+                held[j] = ki * float(self._integral[j])
+        new_rate, torque = problem.solve(v, bias_torque, gain, command, held, enabled)
+        current = [self._current(t) for t in torque]
+        saturated = [
+            enabled[j] and abs(current[j]) > float(self.current_limit_a[j]) for j in range(2)
+        ]
+        if any(saturated):
+            for j in range(2):
+                if saturated[j]:
+                    limit = float(self.current_limit_a[j])
+                    current[j] = min(max(current[j], -limit), limit)
+                    held[j] = float(self._actuator.current_map.torque(current[j]))
+                    gain[j] = 0.0
+            new_rate, torque = problem.solve(v, bias_torque, gain, command, held, enabled)
+            current = [self._current(t) for t in torque]
+        for j in range(2):
+            integrating = enabled[j] and not saturated[j]
+            if integrating:
+                self._integral[j] += dt * (command[j] - new_rate[j])
+            elif not enabled[j]:
+                self._integral[j] = 0.0
+            self.current_a[j] = current[j] if enabled[j] else 0.0
+            self.position_rad[j] = q[j] + dt * new_rate[j]
+            self.velocity_rad_s[j] = new_rate[j]
+        self.time_s += dt
+
+    def _current(self, torque_nm: float) -> float:
+        """Motor current, A, for an output torque (the actuator's map, on one float)."""
+        table = self._actuator.current_map
+        magnitude = abs(torque_nm)
+        torques, currents = table.torques_nm, table.currents_a
+        k = min(max(bisect.bisect_right(torques, magnitude) - 1, 0), len(torques) - 2)
+        slope = (currents[k + 1] - currents[k]) / (torques[k + 1] - torques[k])
+        return math.copysign(currents[k] + slope * (magnitude - torques[k]), torque_nm)
+
+
+Pair = tuple[float, float]
+Matrix = tuple[Pair, Pair]
+
+
+class _StepProblem:
+    """One implicit step: new rates v⁺ and drive torques for τ = gain (v_cmd − v⁺) + held.
+
+    v⁺ minimises ½ v⁺ᵀ W v⁺ − bᵀ v⁺ + Σ_k c_k |a_k · v⁺| with W = M + Δt diag(gain),
+    b = M v + Δt (gain v_cmd + held − bias), c_k = Δt F_k: the implicit (Moreau) step with
+    Coulomb friction on the slides a_k (rows of A). Joints with torque off are held by
+    their gear train (v⁺ = 0 there).
+    """
+
+    def __init__(self, mass: Matrix, slide_map: Matrix, thresholds: Pair, dt: float) -> None:
+        self.mass, self.slide_map, self.thresholds, self.dt = mass, slide_map, thresholds, dt
+
+    def solve(
+        self,
+        rate: list[float],
+        bias: list[float],
+        gain: list[float],
+        command: list[float],
+        held: list[float],
+        enabled: list[bool],
+    ) -> tuple[list[float], list[float]]:
+        (m00, m01), (m10, m11) = self.mass
+        dt = self.dt
+        weights = ((m00 + dt * gain[0], m01), (m10, m11 + dt * gain[1]))
+        linear = (
+            m00 * rate[0] + m01 * rate[1] + dt * (gain[0] * command[0] + held[0] - bias[0]),
+            m10 * rate[0] + m11 * rate[1] + dt * (gain[1] * command[1] + held[1] - bias[1]),
+        )
+        new = _minimise(weights, linear, self.slide_map, self.thresholds, enabled)
+        torque = [
+            gain[j] * (command[j] - new[j]) + held[j] if enabled[j] else 0.0 for j in range(2)
+        ]
+        return list(new), torque
+
+
+def _minimise(
+    weights: Matrix, linear: Pair, slide_map: Matrix, thresholds: Pair, free: list[bool]
+) -> Pair:
+    """argmin over v of ½ vᵀWv − bᵀv + Σ_k c_k |a_k·v|, with v_j = 0 where not free.
+
+    The minimiser of this convex function has each slide either moving (the smooth
+    stationary point of one sign pattern) or stuck (a_k·v = 0: the minimum along that
+    line): every candidate is computed in closed form and the one of least value is the
+    minimiser.
+    """
+    (w00, w01), (w10, w11) = weights
+    b0, b1 = linear
+    (a00, a01), (a10, a11) = slide_map
+    c0, c1 = thresholds
+
+    def value(v0: float, v1: float) -> float:
+        quadratic = 0.5 * (v0 * (w00 * v0 + w01 * v1) + v1 * (w10 * v0 + w11 * v1))
+        friction = c0 * abs(a00 * v0 + a01 * v1) + c1 * abs(a10 * v0 + a11 * v1)
+        return quadratic - b0 * v0 - b1 * v1 + friction
+
+    def along(d0: float, d1: float) -> Pair:
+        # 1-D soft threshold: min over α of ½ w α² − β α + c |α|
+        w = d0 * (w00 * d0 + w01 * d1) + d1 * (w10 * d0 + w11 * d1)
+        beta = b0 * d0 + b1 * d1
+        c = c0 * abs(a00 * d0 + a01 * d1) + c1 * abs(a10 * d0 + a11 * d1)
+        alpha = math.copysign(max(abs(beta) - c, 0.0), beta) / w
+        return alpha * d0, alpha * d1
+
+    if not (free[0] or free[1]):
+        return 0.0, 0.0
+    if not (free[0] and free[1]):
+        return along(1.0, 0.0) if free[0] else along(0.0, 1.0)
+    det = w00 * w11 - w01 * w10
+    candidates = [(0.0, 0.0)]
+    for s0, s1 in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+        # W v = b − Aᵀ (c ∘ s)
+        r0 = b0 - (a00 * c0 * s0 + a10 * c1 * s1)
+        r1 = b1 - (a01 * c0 * s0 + a11 * c1 * s1)
+        candidates.append(((w11 * r0 - w01 * r1) / det, (w00 * r1 - w10 * r0) / det))
+    for k0, k1 in ((a00, a01), (a10, a11)):
+        norm = math.hypot(k0, k1)
+        candidates.append(along(-k1 / norm, k0 / norm))
+    return min(candidates, key=lambda v: value(*v))

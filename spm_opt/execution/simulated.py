@@ -1,0 +1,71 @@
+"""The simulated robot as a backend: the plant read and commanded in the actuators' units."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from spm_opt.execution.backend import Clock, Measurement, MonotonicClock, VirtualClock
+from spm_opt.execution.plant import DynamixelPlant, PlantSettings
+from spm_opt.model.params import Robot
+
+
+class SimulatedRobot:
+    """A :class:`~spm_opt.execution.backend.Backend` on :class:`DynamixelPlant`.
+
+    Parameters
+    ----------
+    robot : Robot
+    start_rad : ndarray, shape (2,), rad, optional
+        Where the robot rests at connection (default: θ = 0).
+    settings : PlantSettings, optional
+    realtime : bool
+        False (default): simulated time jumps from one control period to the next, so a run
+        takes as long as its computation. True: the plant follows the machine's clock.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        start_rad: np.ndarray | None = None,
+        settings: PlantSettings | None = None,
+        realtime: bool = False,
+    ) -> None:
+        self.plant = DynamixelPlant(robot, settings, start_rad)
+        self._actuator = robot.actuator
+        self.realtime = realtime
+        self.clock: Clock = MonotonicClock() if realtime else VirtualClock()
+        self._epoch = self.clock.now()
+
+    def connect(self) -> None:
+        """Enable torque on both actuators (each holds where it is)."""
+        self._epoch = self.clock.now() - self.plant.time_s
+        for joint in range(2):
+            self.plant.enable_torque(joint, True)
+
+    def read(self) -> Measurement:
+        self.plant.advance_to(self.clock.now() - self._epoch)
+        a = self._actuator
+        return Measurement(
+            position_rad=a.angle(self.plant.present_position_pulses()),
+            velocity_rad_s=a.rate(self.plant.present_velocity_units()),
+            current_a=a.current(self.plant.present_current_units()),
+            hardware_error=(int(self.plant.hardware_error[0]), int(self.plant.hardware_error[1])),
+        )
+
+    def write_goal(self, position_rad: np.ndarray) -> None:
+        self.plant.advance_to(self.clock.now() - self._epoch)
+        self.plant.goal_position_rad[:] = self._actuator.angle(self._actuator.pulses(position_rad))
+
+    def close(self) -> None:
+        """Nothing to release: the simulated actuators keep holding their goals."""
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "backend": "simulated",
+            "realtime": self.realtime,
+            "plant": dataclasses.asdict(self.plant.settings),
+            "plant_time_s": self.plant.time_s,
+        }
