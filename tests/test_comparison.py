@@ -1,6 +1,7 @@
 """The planner comparison: one row per planner from the one evaluator, failures as rows,
 the files and figures the command line writes, and the experiment scripts."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -102,12 +103,21 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
         ["compare_planners.py", "--planners", "cubic,ruckig"],
         ["reproduce_paper.py"],
         ["calibrate_prototype.py"],
+        ["hardware_verification.py"],
+        pytest.param(
+            ["hardware_verification.py", "--backend", "emulator"], marks=pytest.mark.slow
+        ),
     ],
-    ids=lambda c: c[0],
+    ids=lambda c: " ".join(c),
 )
 def test_every_experiment_script_runs(tmp_path, command):
     """Each script in experiments/ in a small setting (every script must be listed here)."""
-    listed = {"compare_planners.py", "reproduce_paper.py", "calibrate_prototype.py"}
+    listed = {
+        "compare_planners.py",
+        "reproduce_paper.py",
+        "calibrate_prototype.py",
+        "hardware_verification.py",
+    }
     assert {p.name for p in (ROOT / "experiments").glob("*.py")} == listed
     out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
     script = [sys.executable, str(ROOT / "experiments" / command[0]), *command[1:], *out]
@@ -117,3 +127,13 @@ def test_every_experiment_script_runs(tmp_path, command):
         table = (tmp_path / "all_problems.csv").read_text().splitlines()
         problems = len(list((ROOT / "problems").glob("*.toml")))
         assert len(table) == 1 + 2 * problems
+    if command[0] == "hardware_verification.py":
+        summary = json.loads((tmp_path / "hardware_verification.json").read_text())
+        assert summary["run"]["completed"]
+        assert max(summary["torques"]["smoothed_difference_rms_nm"]) < 0.05
+        assert {p.name for p in tmp_path.glob("fig*.png")} == {
+            "fig15_tracking.png",
+            "fig19_torque_theta1.png",
+            "fig20_torque_theta2.png",
+            "fig25_motion_capture.png",
+        }
