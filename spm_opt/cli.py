@@ -84,7 +84,9 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
     execute.add_argument("--backend", required=True, choices=("sim", "dynamixel"))
     execute.add_argument("--log", required=True, type=Path, help="CSV log to write")
     execute.add_argument("--port", help="serial device of the actuators (dynamixel)")
-    execute.add_argument("--baud", type=int, default=4_000_000, help="baud rate (dynamixel)")
+    execute.add_argument(
+        "--baud", type=int, default=1_000_000, help="baud rate (dynamixel; default 1000000)"
+    )
     execute.add_argument("--ids", default="1,2", help="actuator ids of theta1,theta2 (dynamixel)")
     execute.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="loop rate")
     execute.add_argument(

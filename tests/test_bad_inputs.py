@@ -545,3 +545,86 @@ def test_real_process_prints_one_line(tmp_path: Path) -> None:
     assert_one_error(result.returncode, result.stderr, ("landmarks[0].position_mm",), tmp_path)
     assert result.stdout == ""
     assert_nothing_written(out, tmp_path)
+
+
+# --- execute and emulate -----------------------------------------------------------------
+
+HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
+
+
+@pytest.fixture(scope="module")
+def hardware_plan_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    plan = tmp_path_factory.mktemp("plan") / "plan.csv"
+    assert main(["plan", str(HARDWARE_PROBLEM), "--out", str(plan)]) == 0
+    return plan
+
+
+@pytest.mark.parametrize(
+    ("options", "expected"),
+    [
+        pytest.param(["--rate", "nan"], ("rate_hz = nan", "[1.0, 2000.0]"), id="rate-nan"),
+        pytest.param(["--rate", "0"], ("rate_hz = 0.0",), id="rate-zero"),
+        pytest.param(["--start-deg", "5"], ("--start-deg '5'", "two float"), id="start-one"),
+        pytest.param(["--start-deg", "5,5"], ("5.000 deg away", "approach"), id="start-away"),
+        pytest.param(["--backend", "robot"], ("--backend", "invalid choice"), id="backend"),
+        pytest.param(["--backend", "dynamixel"], ("--port: required",), id="no-port"),
+        pytest.param(
+            ["--backend", "dynamixel", "--port", "/dev/null", "--ids", "1"],
+            ("--ids '1'",),
+            id="ids-one",
+        ),
+        pytest.param(
+            ["--backend", "dynamixel", "--port", "/dev/null", "--baud", "12345"],
+            ("baud", "12345"),
+            id="baud",
+        ),
+        pytest.param(
+            ["--problem", str(ROOT / "problems" / "craniotomy_bone_flap.toml")],
+            ("plan refused: theta", "acceleration step"),
+            id="limit-broken",
+        ),
+    ],
+)
+def test_bad_execute(
+    options: list[str],
+    expected: tuple[str, ...],
+    hardware_plan_csv: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    log = tmp_path / "logs" / "run.csv"
+    argv = ["execute", str(hardware_plan_csv), "--problem", str(HARDWARE_PROBLEM)]
+    argv += ["--backend", "sim", "--log", str(log), *options]
+    status, shown = run_cli(argv)
+    assert_one_error(status, capsys.readouterr().err, expected, tmp_path, shown)
+    assert_nothing_written(log, tmp_path)
+
+
+def test_execute_log_not_csv(
+    hardware_plan_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = tmp_path / "run.txt"
+    argv = ["execute", str(hardware_plan_csv), "--problem", str(HARDWARE_PROBLEM)]
+    status, shown = run_cli([*argv, "--backend", "sim", "--log", str(log)])
+    assert_one_error(
+        status, capsys.readouterr().err, ("run.txt", "ending in .csv"), tmp_path, shown
+    )
+    assert not log.exists()
+
+
+@pytest.mark.parametrize(
+    ("options", "expected"),
+    [
+        pytest.param(["--fault", "melt:at=1"], ("fault: unknown kind 'melt'",), id="kind"),
+        pytest.param(["--fault", "overload:at=1"], ("field 'id' is required",), id="no-id"),
+        pytest.param(["--start-deg", "x,1"], ("--start-deg 'x,1'",), id="start"),
+    ],
+)
+def test_bad_emulate(
+    options: list[str],
+    expected: tuple[str, ...],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    status, shown = run_cli(["emulate", *options])
+    assert_one_error(status, capsys.readouterr().err, expected, tmp_path, shown)

@@ -104,9 +104,7 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
         ["reproduce_paper.py"],
         ["calibrate_prototype.py"],
         ["hardware_verification.py"],
-        pytest.param(
-            ["hardware_verification.py", "--backend", "emulator"], marks=pytest.mark.slow
-        ),
+        pytest.param(["hardware_verification.py", "--backend", "emulator"], marks=pytest.mark.slow),
     ],
     ids=lambda c: " ".join(c),
 )

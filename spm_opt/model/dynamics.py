@@ -426,7 +426,6 @@ def friction_forces(robot: Robot, q: np.ndarray, qd: np.ndarray) -> tuple[np.nda
     return _rows(upper), _rows(lower)
 
 
-
 class PlantTerms:
     """The terms a simulator needs at one state (q, q̇), evaluated through a CasADi
     buffer (about 30 µs a call, no array conversion): the mass matrix M (2, 2), kg·m²;
