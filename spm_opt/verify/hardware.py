@@ -338,8 +338,9 @@ def _markdown(problem: Problem, summary: dict[str, Any]) -> str:
     lines = [
         f"# Hardware verification: {problem.name}",
         "",
-        f"Backend: {run.get('backend')}; run {'completed' if run.get('completed') else 'stopped'}"
-        f" ({run.get('reason')}); {run.get('samples')} samples at "
+        f"Backend: {run.get('backend')}; "
+        + ("run completed" if run.get("completed") else f"safe stop: {run.get('reason')}")
+        + f"; {run.get('samples')} samples at "
         f"{loop.get('achieved_rate_hz', float('nan')):.1f} Hz, period error p99 "
         f"{loop.get('period_error_p99_ms', float('nan')):.3f} ms.",
         "",
