@@ -3,10 +3,9 @@ executor, the Dynamixel backend on the real SDK, and the emulator on a pseudo-te
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import HARDWARE_PROBLEM
 
 import spm_opt as so
 from spm_opt.execution import ExecutionSettings, execute, read_log
@@ -20,15 +19,8 @@ from spm_opt.execution.emulator import (
     spawn_emulator,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
 DEG = np.pi / 180.0
 FAULT_AT_S = 1.0
-
-
-@pytest.fixture(scope="module")
-def problem() -> so.Problem:
-    return so.load_problem(HARDWARE_PROBLEM)
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +60,10 @@ def _ended_in_a_safe_stop(result, table, header) -> None:
     assert abs(last["velocity_theta2_rad_s"]) < 0.005
 
 
-def test_the_move_completes_through_the_sdk_and_the_emulator(problem, short_move, tmp_path):
-    result, table, header = _run(problem, short_move, Faults(), tmp_path)
+def test_the_move_completes_through_the_sdk_and_the_emulator(
+    hardware_problem, short_move, tmp_path
+):
+    result, table, header = _run(hardware_problem, short_move, Faults(), tmp_path)
     assert result.completed and result.at_rest
     assert header["backend"]["backend"] == "dynamixel"
     plan = table[table["phase"] == "plan"]
@@ -92,7 +86,9 @@ def test_the_move_completes_through_the_sdk_and_the_emulator(problem, short_move
     ],
     ids=["dropped replies", "bad crc", "overload", "stuck encoder"],
 )
-def test_each_fault_ends_in_a_safe_stop_at_rest(problem, short_move, tmp_path, faults, reason):
-    result, table, header = _run(problem, short_move, faults, tmp_path)
+def test_each_fault_ends_in_a_safe_stop_at_rest(
+    hardware_problem, short_move, tmp_path, faults, reason
+):
+    result, table, header = _run(hardware_problem, short_move, faults, tmp_path)
     assert result.reason.startswith(reason), result.reason
     _ended_in_a_safe_stop(result, table, header)

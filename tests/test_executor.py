@@ -9,11 +9,11 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import HARDWARE_PROBLEM
 
 import spm_opt as so
 from spm_opt.errors import PreflightError
@@ -21,19 +21,7 @@ from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_l
 from spm_opt.execution.executor import LoopStatistics
 from spm_opt.execution.log import COLUMNS
 
-ROOT = Path(__file__).resolve().parents[1]
-HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
 DEG = np.pi / 180.0
-
-
-@pytest.fixture(scope="module")
-def hardware_problem() -> so.Problem:
-    return so.load_problem(HARDWARE_PROBLEM)
-
-
-@pytest.fixture(scope="module")
-def hardware_plan(hardware_problem: so.Problem) -> so.Trajectory:
-    return so.plan(hardware_problem, "cubic")
 
 
 @pytest.fixture(scope="module")
@@ -185,3 +173,27 @@ def test_bad_settings_are_one_line_errors():
         ExecutionSettings(rate_hz=0)
     with pytest.raises(so.InputError, match="following_error_rad = nan"):
         ExecutionSettings(following_error_rad=float("nan"))
+
+
+class _FailingRobot(SimulatedRobot):
+    """A simulated robot whose 50th read raises what no backend should."""
+
+    reads = 0
+
+    def read(self):  # noqa: ANN201
+        self.reads += 1
+        if self.reads == 50:
+            raise RuntimeError("driver bug")
+        return super().read()
+
+
+def test_an_unexpected_error_still_stops_the_robot_then_is_raised(
+    hardware_problem, hardware_plan, tmp_path
+):
+    robot = _FailingRobot(hardware_problem.robot, start_rad=hardware_plan.position(0.0))
+    with pytest.raises(RuntimeError, match="driver bug"):
+        execute(hardware_plan, robot, hardware_problem, tmp_path / "run.csv")
+    table, header = read_log(tmp_path / "run.csv")
+    assert header["completed"] is False and header["reason"] == "RuntimeError: driver bug"
+    assert header["at_rest"] and table["phase"].iloc[-1] == "hold"
+    assert "stop" in set(table["phase"])

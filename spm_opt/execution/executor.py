@@ -297,7 +297,7 @@ class Executor:
         )
         ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
         commanded = _Commanded(first.position_rad.copy(), np.zeros(2), np.zeros(2))
-        reason, completed, at_rest = "completed", True, False
+        reason, completed, at_rest = "", False, False
         with self._signals():
             try:
                 if approach is not None:
@@ -305,12 +305,14 @@ class Executor:
                 plan = _plan_segment(trajectory)
                 self._stream("plan", plan, commanded, writer, ticker)
                 at_rest = self._settle("settle", commanded, writer, ticker, settings.settle_s)
+                reason, completed = "completed", True
             except _Stop as stop:
-                reason, completed = str(stop), False
-                _LOG.warning("safe stop: %s", reason)
-                stop_segment = self._ruckig_segment("stop", commanded, target=None)
-                self._stream("stop", stop_segment, commanded, writer, ticker, stopping=True)
-                at_rest = self._settle("hold", commanded, writer, ticker, settings.hold_s)
+                reason = str(stop)
+                at_rest = self._safe_stop(reason, commanded, writer, ticker)
+            except Exception as error:  # a bug or a backend's surprise: stop, then raise
+                reason = f"{type(error).__name__}: {error}"
+                at_rest = self._safe_stop(reason, commanded, writer, ticker)
+                raise
             finally:
                 statistics = LoopStatistics.from_ticks(ticker.ticks, ticker.period)
                 backend_state = self.backend.describe()
@@ -327,6 +329,15 @@ class Executor:
         return ExecutionResult(
             completed, reason, log_path, writer.samples, statistics, at_rest, backend_state
         )
+
+    def _safe_stop(
+        self, reason: str, commanded: _Commanded, writer: LogWriter, ticker: _Ticker
+    ) -> bool:
+        """The jerk-limited stop from the commanded state, then the hold; True at rest."""
+        _LOG.warning("safe stop: %s", reason)
+        stop = self._ruckig_segment("stop", commanded, target=None)
+        self._stream("stop", stop, commanded, writer, ticker, stopping=True)
+        return self._settle("hold", commanded, writer, ticker, self.settings.hold_s)
 
     def _stream(
         self,
