@@ -10,7 +10,7 @@ from __future__ import annotations
 import difflib
 import math
 import tomllib
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,23 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise InputError(f"{path}: not valid TOML: {error}") from None
+
+
+def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any], source: str) -> None:
+    """Set dotted keys (``"limits.max_tool_speed_mm_s"``) in parsed TOML ``data``, making
+    missing tables on the way; the readers then validate the values as if the file held
+    them. A key whose parent is not a table is an :class:`InputError`."""
+    for dotted, value in overrides.items():
+        *tables, key = dotted.split(".")
+        table = data
+        for depth, name in enumerate(tables):
+            table = table.setdefault(name, {})
+            if not isinstance(table, dict):
+                parent = ".".join(tables[: depth + 1])
+                raise InputError(f"{source}: override {dotted}: {parent} is not a table")
+        if not key:
+            raise InputError(f"{source}: override {dotted!r}: expected a dotted key")
+        table[key] = value
 
 
 def _describe(value: Any) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -18,7 +19,7 @@ import numpy as np
 
 from spm_opt.contour import Contour
 from spm_opt.errors import InputError
-from spm_opt.fields import Table, read_toml
+from spm_opt.fields import Table, apply_overrides, read_toml
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import RPM
 from spm_opt.model.params import MM, Robot, load_robot
@@ -189,10 +190,23 @@ class Problem:
         return kinematics.inverse_kinematics(kinematics.project_landmarks(points, radius))
 
 
-def load_problem(path: str | Path) -> Problem:
-    """Read and validate a problem file; its ``robot`` path is relative to the file."""
+def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Problem:
+    """Read and validate a problem file; its ``robot`` path is relative to the file.
+
+    ``overrides`` replace values before validation, by dotted key in the file's own
+    units: ``"limits.max_tool_speed_mm_s"``, ``"segment_durations_s"``, ``"landmarks"``
+    (a list of ``{"name", "position_mm"}`` tables), and ``"robot.friction.mu"``,
+    ``"robot.payload.mass_kg"`` (keys of the robot file, after ``robot.``).
+    """
     path = Path(path)
     data = read_toml(path)
+    overrides = dict(overrides or {})
+    robot_overrides = {
+        key.removeprefix("robot."): overrides.pop(key)
+        for key in list(overrides)
+        if key.startswith("robot.")
+    }
+    apply_overrides(data, overrides, str(path))
     root = Table(data, str(path))
     name = root.string("name")
     description = root.string("description", default="")
@@ -200,7 +214,7 @@ def load_problem(path: str | Path) -> Problem:
     robot_path = path.parent / robot_key
     if not robot_path.is_file():
         raise root.error("robot", robot_key, f"no robot file at {robot_path}")
-    robot = load_robot(robot_path)
+    robot = load_robot(robot_path, robot_overrides)
     closed = root.boolean("closed", default=False)
     durations = root.vector(
         "segment_durations_s", minimum=MIN_SEGMENT_DURATION_S, maximum=MAX_SEGMENT_DURATION_S

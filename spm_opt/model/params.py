@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from spm_opt.errors import UnreachableError
-from spm_opt.fields import Table, read_toml
+from spm_opt.fields import Table, apply_overrides, read_toml
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import ACTUATORS, Actuator, CurrentTorqueMap
 
@@ -151,9 +153,12 @@ class Robot:
         return q
 
 
-def load_robot(path: str | Path) -> Robot:
-    """Read and validate a robot file (see ``problems/robots/prototype.toml``)."""
-    root = Table(read_toml(path), str(path))
+def load_robot(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Robot:
+    """Read and validate a robot file (see ``problems/robots/prototype.toml``); ``overrides``
+    replace values by dotted key before validation (``"friction.mu"``)."""
+    data = read_toml(path)
+    apply_overrides(data, overrides or {}, str(path))
+    root = Table(data, str(path))
     name = root.string("name")
     root.string("description", default="")
     bodies = {key: _body(root.table(key), arc=key.endswith("_arc")) for key in _BODIES}

@@ -7,7 +7,7 @@ import math
 import time
 from typing import Any, Protocol, TypeVar
 
-from spm_opt.errors import InputError, UnknownPlannerError
+from spm_opt.errors import InputError, PlanningError, UnknownPlannerError
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory, package_version
 
@@ -19,6 +19,10 @@ class Planner(Protocol):
 
     def plan(self, problem: Problem) -> Trajectory: ...
 
+
+MAX_PLAN_DURATION_S = 3600.0
+"""Longest plan accepted, s: a cut of an hour means a limit in the wrong units, and
+evaluating it at 1 kHz would take gigabytes."""
 
 PLANNERS: dict[str, Planner] = {}
 """Every registered planner by name."""
@@ -96,6 +100,11 @@ def plan(problem: Problem, planner: str = "cubic") -> Trajectory:
     start = time.perf_counter()
     trajectory = chosen.plan(problem)
     elapsed = time.perf_counter() - start
+    if trajectory.duration > MAX_PLAN_DURATION_S:
+        raise PlanningError(
+            f"{chosen.name}: the plan lasts {trajectory.duration:.4g} s, more than "
+            f"{MAX_PLAN_DURATION_S:g} s; are the limits in their units?"
+        )
     statistics = dict(trajectory.metadata.get("statistics", {}))
     statistics.setdefault("solve_time_s", elapsed)
     trajectory.metadata.update(

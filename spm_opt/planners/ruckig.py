@@ -131,6 +131,8 @@ def calculate_locally(inp: ruckig.InputParameter, segment: str) -> ruckig.Trajec
     except ruckig.RuckigError as error:
         reason = next((line for line in str(error).splitlines() if line.strip()), "no message")
         raise PlanningError(f"ruckig: {segment}: {reason.strip()}") from None
+    except ValueError as error:  # a result code its Python binding does not know
+        raise PlanningError(f"ruckig: {segment}: ruckig failed ({error})") from None
     if result not in (ruckig.Result.Working, ruckig.Result.Finished):
         words = _RESULT_WORDS.get(result, f"returned {result}")
         raise PlanningError(f"ruckig: {segment}: ruckig {words} ({result.name})")

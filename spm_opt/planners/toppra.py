@@ -66,7 +66,7 @@ from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.trajectory import MAX_DURATION_S, Trajectory
 
 _JERK_ITERATIONS = 8
 """Rescalings of the moving-average window before giving up."""
@@ -363,6 +363,11 @@ def _uniform_profile(s: np.ndarray, speed: np.ndarray, step: float) -> PPoly:
     if not np.all(np.isfinite(durations)):
         raise PlanningError("toppra: the path speed is zero between two gridpoints")
     knots = np.concatenate([[0.0], np.cumsum(durations)])
+    if knots[-1] > MAX_DURATION_S:
+        raise PlanningError(
+            f"toppra: a segment would last {knots[-1]:.4g} s, more than {MAX_DURATION_S:g} s; "
+            "are the limits in their units?"
+        )
     times = np.linspace(0.0, knots[-1], max(1, math.ceil(knots[-1] / step)) + 1)
     rate = np.interp(times, knots, speed)
     rate[[0, -1]] = 0.0
