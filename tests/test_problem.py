@@ -61,3 +61,25 @@ def test_a_problem_built_in_code_checks_itself(paper_problem, change, message):
     }
     with pytest.raises(so.InputError, match=message):
         dataclasses.replace(paper_problem, **{**two, **change})
+
+
+def test_overrides_replace_values_before_validation():
+    path = Path(__file__).resolve().parents[1] / "problems" / "craniotomy_bone_flap.toml"
+    problem = so.load_problem(
+        path,
+        {
+            "robot.friction.mu": 0.04,
+            "robot.payload.mass_kg": 0.5,
+            "limits.max_tool_speed_mm_s": 5.0,
+            "segment_durations_s": [5.0, 6.0, 7.0, 8.0],
+        },
+    )
+    assert problem.robot.friction.mu == 0.04 and problem.robot.payload.mass == 0.5
+    assert problem.limits.max_tool_speed == pytest.approx(5e-3)
+    assert list(problem.segment_durations) == [5.0, 6.0, 7.0, 8.0]
+    with pytest.raises(so.InputError, match=r"friction\.mu = -1: expected a number"):
+        so.load_problem(path, {"robot.friction.mu": -1})
+    with pytest.raises(so.InputError, match="limits.max_tool_sped_mm_s: unknown key"):
+        so.load_problem(path, {"limits.max_tool_sped_mm_s": 5.0})
+    with pytest.raises(so.InputError, match="override name.x: name is not a table"):
+        so.load_problem(path, {"name.x": 1})
