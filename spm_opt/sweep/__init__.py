@@ -1,0 +1,1 @@
+"""Parameter sweeps: specifications, tasks, runners (process pool or Dask), results."""

@@ -1,0 +1,237 @@
+"""Sweep specifications: a base problem, planners, and the axes to vary (TOML).
+
+    name = "friction_payload"
+    problem = "../craniotomy_bone_flap.toml"          # relative to this file
+    planners = ["cubic", "toppra", "ocp-min-time"]
+
+    [grid]                                            # every combination of the lists
+    "robot.friction.mu" = [0.0025, 0.04, 0.24]
+    "robot.payload.mass_kg" = [0.0, 0.25, 0.5]
+
+    [random]                                          # samples drawn uniformly, seeded
+    samples = 20
+    seed = 1
+    [random.ranges]
+    "limits.max_tool_speed_mm_s" = [2.0, 6.0]
+
+    [flaps]                                           # generated bone flaps, seeded
+    count = 200
+    seed = 7
+    size_mm = [20.0, 50.0]
+    landmarks = 4
+    tool_speed_mm_s = 2.0                             # sets each flap's segment durations
+
+Keys are those of the problem file, in its units, with ``robot.`` before the robot file's
+(see :func:`spm_opt.problem.load_problem`). The tasks are every grid combination × every
+random sample × every flap × every planner. Every axis is checked when the file is read:
+an unknown key, an empty axis, a value the problem would refuse or a bad range is a
+one-line error naming it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spm_opt.errors import InputError
+from spm_opt.fields import Table, read_toml
+from spm_opt.planners import PLANNERS
+from spm_opt.problem import Problem, load_problem
+from spm_opt.sweep.task import Task, task_key
+
+
+@dataclass(frozen=True)
+class RandomAxes:
+    """``samples`` draws of every key, uniform in its (low, high) range, from ``seed``."""
+
+    samples: int
+    seed: int
+    ranges: dict[str, tuple[float, float]]
+
+    def draws(self) -> list[dict[str, float]]:
+        rng = np.random.default_rng(self.seed)
+        return [
+            {key: float(rng.uniform(low, high)) for key, (low, high) in self.ranges.items()}
+            for _ in range(self.samples)
+        ]
+
+
+@dataclass(frozen=True)
+class FlapAxis:
+    """``count`` random bone flaps (:func:`spm_opt.sweep.flaps.random_flaps`)."""
+
+    count: int
+    seed: int
+    size_range_mm: tuple[float, float]
+    landmarks: int
+    tool_speed_mm_s: float
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A validated sweep specification; :meth:`tasks` expands it."""
+
+    name: str
+    description: str
+    problem_path: Path
+    planners: tuple[str, ...]
+    grid: dict[str, list[Any]]
+    random: RandomAxes | None
+    flaps: FlapAxis | None
+    source: Path
+
+    def parameter_sets(self, problem: Problem) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+        """Every (parameters, overrides) pair, in a fixed order."""
+        keys = list(self.grid)
+        grid = [
+            dict(zip(keys, values, strict=True))
+            for values in itertools.product(*(self.grid[key] for key in keys))
+        ]
+        draws = self.random.draws() if self.random else [{}]
+        flaps: list[tuple[dict[str, Any], dict[str, Any]]] = [({}, {})]
+        if self.flaps is not None:
+            from spm_opt.sweep.flaps import random_flaps
+
+            f = self.flaps
+            flaps = [
+                (
+                    {"flap": index, "flap_size_mm": flap.size_mm},
+                    {
+                        "landmarks": flap.landmark_overrides(),
+                        "segment_durations_s": flap.segment_durations_s(f.tool_speed_mm_s),
+                    },
+                )
+                for index, flap in enumerate(
+                    random_flaps(problem, f.count, f.size_range_mm, f.landmarks, f.seed)
+                )
+            ]
+        sets = []
+        for point, draw, (flap_parameters, flap_overrides) in itertools.product(grid, draws, flaps):
+            parameters = {**point, **draw, **flap_parameters}
+            sets.append((parameters, {**point, **draw, **flap_overrides}))
+        return sets
+
+    def tasks(self) -> list[Task]:
+        """Every task of the sweep: each parameter set with each planner."""
+        problem = load_problem(self.problem_path)
+        identity = _files_hash(problem)
+        return [
+            Task(
+                key=task_key(identity, planner, overrides),
+                sweep=self.name,
+                problem_path=str(self.problem_path),
+                planner=planner,
+                parameters=parameters,
+                overrides=overrides,
+            )
+            for parameters, overrides in self.parameter_sets(problem)
+            for planner in self.planners
+        ]
+
+
+def _files_hash(problem: Problem) -> str:
+    """SHA-256 of the problem file and its robot file: a changed file makes new tasks."""
+    digest = hashlib.sha256()
+    digest.update((problem.source_sha256 or "").encode())
+    robot = problem.source.parent / read_toml(problem.source)["robot"]
+    digest.update(robot.read_bytes())
+    return digest.hexdigest()
+
+
+def load_sweep_spec(path: str | Path) -> SweepSpec:
+    """Read and validate a sweep specification (see the module's docstring)."""
+    path = Path(path)
+    root = Table(read_toml(path), str(path))
+    name = root.string("name")
+    description = root.string("description", default="")
+    problem_key = root.string("problem")
+    problem_path = (path.parent / problem_key).resolve()
+    if not problem_path.is_file():
+        raise root.error("problem", problem_key, f"no problem file at {problem_path}")
+    load_problem(problem_path)  # the base problem itself must be valid
+    planners = root.raw("planners")
+    if (
+        not isinstance(planners, list)
+        or not planners
+        or not all(isinstance(p, str) and p in PLANNERS for p in planners)
+    ):
+        raise root.error(
+            "planners", planners, f"expected a non-empty list of {', '.join(sorted(PLANNERS))}"
+        )
+    grid = _grid(root.table("grid", required=False), problem_path)
+    random = _random(root.table("random", required=False), problem_path, grid)
+    flaps = _flaps(root.table("flaps", required=False))
+    root.finish()
+    return SweepSpec(name, description, problem_path, tuple(planners), grid, random, flaps, path)
+
+
+def _check_value(table: Table, key: str, value: Any, problem_path: Path) -> None:
+    """The base problem with this one value must load: unknown keys and bad values fail."""
+    try:
+        load_problem(problem_path, {key: value})
+    except InputError as error:
+        raise InputError(f"{table.name(key)} = {value!r}: {error}") from None
+
+
+def _grid(table: Table, problem_path: Path) -> dict[str, list[Any]]:
+    grid = {}
+    for key in table.keys():
+        values = table.raw(key)
+        if not isinstance(values, list) or not values:
+            raise table.error(key, values, "expected a non-empty list of values (an axis)")
+        for value in values:
+            _check_value(table, key, value, problem_path)
+        grid[key] = values
+    table.finish()
+    return grid
+
+
+def _random(table: Table, problem_path: Path, grid: dict[str, list[Any]]) -> RandomAxes | None:
+    if not table.keys():
+        return None
+    samples = _integer(table, "samples", 1, 100_000)
+    seed = _integer(table, "seed", 0, 2**32 - 1, default=0)
+    ranges_table = table.table("ranges")
+    ranges = {}
+    for key in ranges_table.keys():
+        low, high = ranges_table.vector(key, length=2)
+        if not low < high:
+            raise ranges_table.error(key, [low, high], "expected [low, high] with low < high")
+        if key in grid:
+            raise ranges_table.error(key, [low, high], "already an axis of [grid]")
+        for value in (low, high):
+            _check_value(ranges_table, key, value, problem_path)
+        ranges[key] = (float(low), float(high))
+    if not ranges:
+        raise table.error("ranges", {}, "expected at least one key = [low, high]")
+    ranges_table.finish()
+    table.finish()
+    return RandomAxes(samples, seed, ranges)
+
+
+def _flaps(table: Table) -> FlapAxis | None:
+    if not table.keys():
+        return None
+    count = _integer(table, "count", 1, 100_000)
+    seed = _integer(table, "seed", 0, 2**32 - 1, default=0)
+    low, high = table.vector("size_mm", length=2, minimum=0.0, exclusive_minimum=True)
+    if not low <= high:
+        raise table.error("size_mm", [low, high], "expected [low, high] with low <= high")
+    landmarks = _integer(table, "landmarks", 3, 12, default=4)
+    speed = table.number("tool_speed_mm_s", default=2.0, minimum=0.0, exclusive_minimum=True)
+    table.finish()
+    return FlapAxis(count, seed, (float(low), float(high)), landmarks, float(speed))
+
+
+def _integer(table: Table, key: str, low: int, high: int, default: int | None = None) -> int:
+    value = table.number(
+        key, minimum=low, maximum=high, **({} if default is None else {"default": default})
+    )
+    if value != int(value):
+        raise table.error(key, value, f"expected a whole number in [{low}, {high}]")
+    return int(value)

@@ -1,0 +1,79 @@
+"""One task of a sweep: a problem with overrides, one planner, one row of results."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from spm_opt.comparison import Outcome, run_planners
+from spm_opt.problem import load_problem
+
+
+@dataclass(frozen=True)
+class Task:
+    """A planner on a problem whose values are overridden (see :func:`load_problem`).
+
+    Attributes
+    ----------
+    key : str
+        16 hex digits: the hash of the problem file's contents, the planner and the
+        overrides; what makes a sweep resumable.
+    sweep : str
+    problem_path : str
+        The base problem file (absolute).
+    planner : str
+    parameters : dict
+        What the sweep varies, as people read it (``{"robot.friction.mu": 0.04}``,
+        ``{"flap": 3, "flap_size_mm": 41.2}``).
+    overrides : dict
+        What :func:`load_problem` gets: the parameters' keys and values, and for a
+        generated flap its landmarks and segment durations.
+    """
+
+    key: str
+    sweep: str
+    problem_path: str
+    planner: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+
+def task_key(problem_sha256: str, planner: str, overrides: dict[str, Any]) -> str:
+    """The task's identity: 16 hex digits of SHA-256 over what decides its result."""
+    text = json.dumps([problem_sha256, planner, overrides], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def run_task(task: Task) -> dict[str, Any]:
+    """Plan and evaluate one task; a failure (a bad override, an infeasible problem, a
+    planner's error) is a row with status "failed" and the error, never an exception.
+
+    The row: key, sweep, planner, parameters, then the comparison's columns
+    (:data:`spm_opt.comparison.COLUMNS`: status, times, the evaluator's figures, the
+    violations and the error), NaN as None.
+    """
+    try:
+        problem = load_problem(task.problem_path, task.overrides)
+    except Exception as error:  # noqa: BLE001 - an impossible combination is a row
+        outcome = Outcome(task.planner, 0.0, error=f"{type(error).__name__}: {error}")
+    else:
+        outcome = run_planners(problem, [task.planner])[0]
+    row = {k: _plain(v) for k, v in outcome.row().items()}
+    return {
+        "key": task.key,
+        "sweep": task.sweep,
+        "planner": task.planner,
+        "parameters": task.parameters,
+        **row,
+    }
+
+
+def _plain(value: Any) -> Any:
+    """Numbers as Python floats, NaN as None: rows are standard JSON."""
+    if isinstance(value, str | bool | int) or value is None:
+        return value
+    number = float(value)
+    return None if math.isnan(number) else number

@@ -1,0 +1,129 @@
+"""Sweep specifications: expansion into tasks, keys, and one-line errors for bad specs."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+import spm_opt as so
+from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.sweep.task import run_task
+
+ROOT = Path(__file__).resolve().parents[1]
+SWEEPS = ROOT / "problems" / "sweeps"
+PROBLEM = (ROOT / "problems" / "craniotomy_bone_flap.toml").as_posix()
+
+GOOD = f'''
+name = "small"
+problem = "{PROBLEM}"
+planners = ["cubic", "ruckig"]
+
+[grid]
+"robot.friction.mu" = [0.04, 0.24]
+"limits.max_tool_speed_mm_s" = [2.0, 3.0, 4.0]
+
+[random]
+samples = 2
+seed = 5
+[random.ranges]
+"robot.payload.mass_kg" = [0.0, 0.5]
+'''
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "sweep.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_every_combination_with_every_planner_once(tmp_path):
+    spec = load_sweep_spec(write(tmp_path, GOOD))
+    tasks = spec.tasks()
+    assert len(tasks) == 2 * 3 * 2 * 2
+    assert len({t.key for t in tasks}) == len(tasks)
+    combos = {
+        (t.parameters["robot.friction.mu"], t.parameters["limits.max_tool_speed_mm_s"])
+        for t in tasks
+    }
+    assert len(combos) == 6
+    masses = {t.parameters["robot.payload.mass_kg"] for t in tasks}
+    assert len(masses) == 2 and all(0.0 <= m <= 0.5 for m in masses)
+    # the same file gives the same tasks (the random draws are seeded): a sweep can resume
+    assert [t.key for t in load_sweep_spec(write(tmp_path, GOOD)).tasks()] == [t.key for t in tasks]
+
+
+def test_a_task_runs_with_its_overrides(tmp_path):
+    task = load_sweep_spec(write(tmp_path, GOOD)).tasks()[0]
+    row = run_task(task)
+    problem = so.load_problem(PROBLEM, task.overrides)
+    assert problem.robot.friction.mu == task.parameters["robot.friction.mu"]
+    assert row["key"] == task.key and row["planner"] == task.planner
+    assert row["status"] != "failed" and row["duration_s"] == pytest.approx(40.0)
+
+
+@pytest.mark.parametrize("planner", ["toppra", "ruckig"])
+def test_an_impossible_task_is_a_row_not_an_exception(tmp_path, planner):
+    """A joint speed limit in the wrong units (1e-6 rpm) once took toppra to a 5 GB array
+    and ruckig to a ValueError: now a failed row each, quickly."""
+    task = load_sweep_spec(write(tmp_path, GOOD)).tasks()[0]
+    overrides = {"limits.max_joint_speed_rpm": 1e-6}
+    bad = dataclasses.replace(task, planner=planner, parameters=overrides, overrides=overrides)
+    row = run_task(bad)
+    assert row["status"] == "failed" and row["duration_s"] is None
+    assert row["error"].startswith(f"PlanningError: {planner}")
+
+
+@pytest.mark.parametrize("name", ["friction_payload", "tool_speed"])
+def test_shipped_grid_sweeps_expand(name):
+    spec = load_sweep_spec(SWEEPS / f"{name}.toml")
+    assert spec.tasks() and spec.name == name
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (
+            ('"robot.friction.mu" = [0.04, 0.24]', '"robot.friction.mu" = []'),
+            "grid.robot.friction.mu = []: expected a non-empty list",
+        ),
+        (('"robot.friction.mu"', '"robot.friction.muu"'), "unknown key; did you mean 'mu'?"),
+        (("[0.04, 0.24]", "[0.04, -1.0]"), "grid.robot.friction.mu = -1.0"),
+        (
+            ('"limits.max_tool_speed_mm_s"', '"limits.max_tool_speed_mps"'),
+            "limits.max_tool_speed_mps: unknown key",
+        ),
+        (("[0.0, 0.5]", "[0.5, 0.0]"), "expected [low, high] with low < high"),
+        (("samples = 2", "samples = 0"), "random.samples = 0"),
+        (("samples = 2", "samples = 2.5"), "expected a whole number"),
+        (
+            ('["cubic", "ruckig"]', '["cubic", "fast"]'),
+            "planners = ['cubic', 'fast']: expected a non-empty list of",
+        ),
+        (('planners = ["cubic", "ruckig"]', 'planner = ["cubic"]'), "planner: unknown key"),
+        (
+            (f'problem = "{PROBLEM}"', 'problem = "nowhere.toml"'),
+            "problem = 'nowhere.toml': no problem file",
+        ),
+    ],
+    ids=[
+        "empty-axis",
+        "unknown-robot-key",
+        "bad-value",
+        "unknown-limit",
+        "bad-range",
+        "no-samples",
+        "fractional",
+        "unknown-planner",
+        "typo-key",
+        "no-problem",
+    ],
+)
+def test_bad_specs_are_one_line_errors(tmp_path, edit, expected):
+    old, new = edit
+    assert old in GOOD
+    with pytest.raises(so.InputError) as caught:
+        load_sweep_spec(write(tmp_path, GOOD.replace(old, new, 1)))
+    message = str(caught.value)
+    assert expected in message and "\n" not in message
