@@ -27,6 +27,7 @@ from spm_opt.model.dynamics import inverse_dynamics, mechanical_energy
 from spm_opt.model.params import Robot, load_robot
 from spm_opt.planners import PLANNERS, plan
 from spm_opt.problem import Limits, Problem, load_problem
+from spm_opt.sweep.results import load_sweep
 from spm_opt.trajectory import Trajectory, package_version
 
 __version__ = package_version()
@@ -56,6 +57,7 @@ __all__ = [
     "mechanical_energy",
     "load_problem",
     "load_robot",
+    "load_sweep",
     "plan",
     "read_log",
 ]

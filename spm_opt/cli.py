@@ -66,6 +66,19 @@ def _parser() -> argparse.ArgumentParser:
     _execute_parser(commands)
     _emulate_parser(commands)
 
+    sweep = commands.add_parser(
+        "sweep", help="run a parameter sweep (resumable) on a process pool or a Dask cluster"
+    )
+    sweep.add_argument("spec", type=Path, help="sweep specification TOML (problems/sweeps/)")
+    sweep.add_argument("--out", required=True, type=Path, help="output directory")
+    sweep.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    sweep.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler tcp://host:port, or 'local' for a Dask cluster on this machine",
+    )
+
     evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
     evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
@@ -175,6 +188,22 @@ def _emulate(args: argparse.Namespace) -> None:
     serve(robot, ids, start, faults, args.seed, announce=lambda device: print(device, flush=True))
 
 
+def _sweep(args: argparse.Namespace) -> None:
+    from spm_opt.sweep.results import write_sweep_report
+    from spm_opt.sweep.runner import run_sweep
+    from spm_opt.sweep.spec import load_sweep_spec
+
+    spec = load_sweep_spec(args.spec)
+    summary = run_sweep(spec.tasks(), args.out, workers=args.workers, scheduler=args.scheduler)
+    print(
+        f"{spec.name}: {summary.total} tasks, {summary.skipped} already done, "
+        f"{summary.done} run ({summary.failed} failed) in {summary.seconds:.1f} s",
+        file=sys.stderr,
+    )
+    for path in write_sweep_report(args.out, title=spec.description or spec.name):
+        print(path)
+
+
 def _reproduce(args: argparse.Namespace) -> None:
     from spm_opt.reproduce import reproduce
 
@@ -234,6 +263,7 @@ _COMMANDS = {
     "evaluate": _evaluate,
     "execute": _execute,
     "emulate": _emulate,
+    "sweep": _sweep,
 }
 
 

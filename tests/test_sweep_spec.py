@@ -90,6 +90,7 @@ def test_shipped_grid_sweeps_expand(name):
         ),
         (('"robot.friction.mu"', '"robot.friction.muu"'), "unknown key; did you mean 'mu'?"),
         (("[0.04, 0.24]", "[0.04, -1.0]"), "grid.robot.friction.mu = -1.0"),
+        (("[0.04, 0.24]", "[0.04, 0.04]"), "expected each value once"),
         (
             ('"limits.max_tool_speed_mm_s"', '"limits.max_tool_speed_mps"'),
             "limits.max_tool_speed_mps: unknown key",
@@ -111,6 +112,7 @@ def test_shipped_grid_sweeps_expand(name):
         "empty-axis",
         "unknown-robot-key",
         "bad-value",
+        "twice",
         "unknown-limit",
         "bad-range",
         "no-samples",

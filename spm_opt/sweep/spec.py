@@ -184,6 +184,8 @@ def _grid(table: Table, problem_path: Path) -> dict[str, list[Any]]:
         values = table.raw(key)
         if not isinstance(values, list) or not values:
             raise table.error(key, values, "expected a non-empty list of values (an axis)")
+        if len({repr(v) for v in values}) < len(values):
+            raise table.error(key, values, "expected each value once")
         for value in values:
             _check_value(table, key, value, problem_path)
         grid[key] = values

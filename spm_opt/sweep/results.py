@@ -1,0 +1,411 @@
+"""A sweep's results: ``DIR/results.jsonl`` read into a table, and the sweep's report.
+
+    from spm_opt.sweep.results import load_sweep, write_sweep_report
+    frame = load_sweep("runs/friction_payload")         # one row per finished task
+    paths = write_sweep_report("runs/friction_payload")
+
+The report goes beside the results, all files or none: ``results.parquet`` and
+``results.csv`` (the table), ``summary.md`` (counts, robustness per planner, the commonest
+failures and violations, the medians per value of every swept parameter) and the figures
+of :mod:`spm_opt.sweep.results_figures`.
+
+A task is *planned* when its status is not "failed" and *clean* when it is "ok" (planned
+with no limit violated); the metrics' medians are over the planned tasks.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from spm_opt.comparison import COLUMNS
+from spm_opt.errors import InputError
+from spm_opt.files import write_atomically
+
+_LOG = logging.getLogger(__name__)
+
+RESULTS_FILE = "results.jsonl"
+"""The file, in a sweep's directory, that the runner appends one row per task to."""
+_TEXT = ("status", "violations", "error")
+NUMERIC_COLUMNS = tuple(c for c in COLUMNS if c not in ("planner", *_TEXT))
+"""The comparison's numeric columns: a number or null in every row."""
+
+METRICS = {  # column: (table heading, axis label)
+    "duration_s": ("duration s", "duration (s)"),
+    "duration_over_lower_bound": ("over bound", "duration / lower bound"),
+    "max_contour_deviation_mm": ("max dev. mm", "max contour deviation (mm)"),
+    "max_tool_speed_mm_s": ("max tool mm/s", "max tool speed (mm/s)"),
+    "peak_torque_nm": ("peak τ N·m", "peak torque, larger joint (N·m)"),
+    "effort_n2m2s": ("∫τᵀτ N²m²s", "effort ∫τᵀτ dt (N²·m²·s)"),
+    "wall_time_s": ("wall s", "wall time (s)"),
+}
+"""The key metrics the summary and the figures show; ``peak_torque_nm`` is the larger of
+the two joints' peak torques."""
+
+FLAP = "flap"
+"""The parameter naming a generated bone flap (an index: never an axis)."""
+MAX_LEVELS = 12
+"""A swept parameter with at most this many values is tabulated and drawn per value; one
+with more (a random range, flap sizes) per quantile bin."""
+BINS = 5
+"""Quantile bins of a parameter with more than :data:`MAX_LEVELS` values."""
+_FAILURES_SHOWN = 10
+
+
+def load_sweep(directory: str | Path) -> pd.DataFrame:
+    """Read a sweep's ``results.jsonl``: one row per task.
+
+    Parameters
+    ----------
+    directory : str or Path
+        The sweep's directory, holding ``results.jsonl``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``key``, ``sweep``, ``planner``, then one column per parameter named by its
+        key (``robot.friction.mu``; NaN where a task lacks it), then every column of
+        :data:`spm_opt.comparison.COLUMNS` (NaN, or "" for text, where a row lacks it), then
+        any other field (``worker``, ``finished_at``...). A task written twice keeps its
+        last row. ``frame.attrs["parameters"]`` lists the parameter columns.
+
+    Raises
+    ------
+    InputError
+        No such directory or file, or a line that is not a task's row (its number named).
+        A torn last line (text after the last newline, left by a crash while it was
+        written) is ignored and logged, as the runner cuts it off before resuming.
+    """
+    path = Path(directory) / RESULTS_FILE
+    if not Path(directory).is_dir():
+        raise InputError(f"{directory}: no such sweep directory")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file (has the sweep finished a task?)") from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputError(f"{path}: cannot be read ({error})") from None
+    complete, _, torn = text.rpartition("\n")
+    lines = complete.split("\n")
+    if torn:
+        _LOG.warning("%s, line %d: torn last line ignored", path, len(lines) + bool(complete))
+    rows: list[dict[str, Any]] = []
+    parameters: dict[str, None] = {}  # ordered as first seen
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as error:
+            raise InputError(f"{path}, line {number}: not valid JSON ({error.msg})") from None
+        rows.append(_checked(row, f"{path}, line {number}"))
+        parameters.update(dict.fromkeys(rows[-1]["parameters"]))
+    flat = [{**row.pop("parameters"), **row} for row in rows]
+    known = ["key", "sweep", "planner", *parameters, *COLUMNS]
+    others = {name: None for row in flat for name in row if name not in known}
+    frame = pd.DataFrame(flat, columns=list(dict.fromkeys([*known, *others])))
+    frame = frame.drop_duplicates("key", keep="last").reset_index(drop=True)
+    for name in NUMERIC_COLUMNS:
+        frame[name] = frame[name].astype(float)
+    for name in _TEXT:
+        frame[name] = frame[name].fillna("")
+    frame.attrs["parameters"] = list(parameters)
+    return frame
+
+
+def _checked(row: Any, where: str) -> dict[str, Any]:
+    """The row if it is a task's: an object with text key, planner and status, an object of
+    parameters not named like a field, and numbers (or null) for the numeric columns."""
+    if not isinstance(row, dict):
+        raise InputError(f"{where}: expected a JSON object, got {type(row).__name__}")
+    for name in ("key", "planner", "status"):
+        if not isinstance(row.get(name), str):
+            raise InputError(f"{where}: {name!r} must be a string, got {row.get(name)!r}")
+    parameters = row.setdefault("parameters", {})
+    if not isinstance(parameters, dict):
+        raise InputError(f"{where}: 'parameters' must be an object, got {parameters!r}")
+    for name in parameters:
+        if name in row or name in COLUMNS:
+            raise InputError(f"{where}: parameter {name!r} has the name of a field")
+    for name in NUMERIC_COLUMNS:
+        value = row.get(name)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise InputError(f"{where}: {name!r} must be a number or null, got {value!r}")
+    return row
+
+
+def write_sweep_report(directory: str | Path, title: str | None = None) -> list[Path]:
+    """Write a sweep's table, summary and figures into its directory, all or none.
+
+    Parameters
+    ----------
+    directory : str or Path
+        The sweep's directory, holding ``results.jsonl``.
+    title : str, optional
+        The summary's heading; by default "Sweep <name>".
+
+    Returns
+    -------
+    list of Path
+        Every file written, sorted: ``results.parquet``, ``results.csv``, ``summary.md``
+        and the figures (see :func:`spm_opt.sweep.results_figures.sweep_figures`).
+
+    Raises
+    ------
+    InputError
+        As :func:`load_sweep`, or the sweep has no finished task yet.
+    """
+    from spm_opt.plots import to_png
+    from spm_opt.sweep.results_figures import sweep_figures
+
+    directory = Path(directory)
+    frame = load_sweep(directory)
+    if frame.empty:
+        raise InputError(f"{directory / RESULTS_FILE}: no finished task to report on")
+    name = ", ".join(str(s) for s in frame["sweep"].dropna().unique()) or directory.name
+    data = with_metrics(frame)
+    parameters = frame.attrs["parameters"]
+    figures = {
+        directory / file: to_png(figure) for file, figure in sweep_figures(data, parameters, name)
+    }
+    parquet = io.BytesIO()
+    frame.to_parquet(parquet, index=False)
+    contents: dict[Path, str | bytes] = {
+        directory / "results.parquet": parquet.getvalue(),
+        directory / "results.csv": frame.to_csv(index=False),
+        directory / "summary.md": sweep_markdown(
+            data, parameters, title or f"Sweep {name}", [path.name for path in figures]
+        ),
+        **figures,
+    }
+    write_atomically(contents)
+    return sorted(contents)
+
+
+def with_metrics(frame: pd.DataFrame) -> pd.DataFrame:
+    """A copy of a sweep's table with ``peak_torque_nm`` (the larger joint's peak torque)
+    and the attrs kept."""
+    data = frame.copy()
+    data["peak_torque_nm"] = frame[["peak_torque_1_nm", "peak_torque_2_nm"]].max(axis=1)
+    return data
+
+
+def shown_metrics(data: pd.DataFrame) -> list[str]:
+    """The key metrics (:data:`METRICS`) that some task has a value of."""
+    return [name for name in METRICS if data[name].notna().any()]
+
+
+def swept_parameters(data: pd.DataFrame, parameters: Sequence[str]) -> list[str]:
+    """The numeric parameters that take at least two values (never ``flap``, an index)."""
+    return [
+        name
+        for name in parameters
+        if name != FLAP
+        and pd.api.types.is_numeric_dtype(data[name])
+        and not pd.api.types.is_bool_dtype(data[name])
+        and data[name].nunique() >= 2
+    ]
+
+
+def groups(values: pd.Series) -> pd.Series:
+    """Each task's group along a swept parameter: its value if the parameter takes at most
+    :data:`MAX_LEVELS` values, else its quantile bin, a category named by the least and
+    the greatest value in it (``20.1–27.5``)."""
+    if values.nunique() <= MAX_LEVELS:
+        return values
+    bins = pd.qcut(values, BINS, duplicates="drop").cat.remove_unused_categories()
+    span = values.groupby(bins, observed=True).agg(["min", "max"]).to_numpy()
+    return bins.cat.rename_categories([f"{low:.4g}–{high:.4g}" for low, high in span])
+
+
+def robustness(data: pd.DataFrame, by: Sequence[pd.Series], metrics: Sequence[str]) -> pd.DataFrame:
+    """Per group of ``by``: tasks, planned and clean (counts), their rates (fractions), and
+    the median of each metric over the planned tasks."""
+    planned = data["status"] != "failed"
+    table = pd.DataFrame(
+        {"tasks": 1, "planned": planned, "clean": data["status"] == "ok"}, index=data.index
+    )
+    for name in metrics:
+        table[name] = data[name].where(planned)
+    grouped = table.groupby(list(by), observed=True, sort=True)
+    result = grouped[["tasks", "planned", "clean"]].sum()
+    result["planned_rate"] = result["planned"] / result["tasks"]
+    result["clean_rate"] = result["clean"] / result["tasks"]
+    return result.join(grouped[list(metrics)].median())
+
+
+def planner_order(data: pd.DataFrame) -> pd.Series:
+    """The planner column as a categorical, its categories in the order the planners first
+    appear (groups then come in that order)."""
+    return data["planner"].astype(pd.CategoricalDtype(list(data["planner"].unique())))
+
+
+def level_label(value: Any) -> str:
+    """A group of :func:`groups` as text: ``0.04``, or a bin's name."""
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def sweep_markdown(
+    data: pd.DataFrame, parameters: Sequence[str], title: str, figures: Sequence[str] = ()
+) -> str:
+    """The summary: counts, robustness per planner, failures, violations, the medians per
+    value of each swept parameter, and links to the ``figures`` (file names).
+
+    ``data`` is a sweep's table with its key metrics (:func:`with_metrics`).
+    """
+    metrics = shown_metrics(data)
+    swept = swept_parameters(data, parameters)
+    planner = planner_order(data)
+    lines = [f"# {title}", "", *_overview(data, parameters, swept), ""]
+
+    counts = [("all", data)] + [(name, data[planner == name]) for name in planner.cat.categories]
+    lines += ["## Counts", ""]
+    lines += _table(
+        ["planner", "tasks", "ok", "with violations", "failed"],
+        [[name, len(part), *_outcome_counts(part["status"])] for name, part in counts],
+    )
+    lines += ["", "## Robustness per planner", ""]
+    lines += [
+        "Planned: the planner returned a plan (status not failed); clean: one that breaks "
+        "no limit (status ok). Medians over the planned tasks.",
+        "",
+    ]
+    table = robustness(data, [planner], metrics)
+    lines += _table(
+        ["planner", "tasks", "planned", "clean", "planned %", "clean %"]
+        + [f"median {METRICS[m][0]}" for m in metrics],
+        [[name, *_robustness_cells(row, metrics)] for name, row in table.iterrows()],
+    )
+
+    lines += ["", "## Most common failures", "", *_failures(data)]
+    lines += ["", "## Most common violations", "", *_violations(data)]
+    for name in swept:
+        level = groups(data[name])
+        binned = isinstance(level.dtype, pd.CategoricalDtype)
+        lines += ["", f"## Medians by {name}", ""]
+        lines += [
+            (f"In {level.nunique()} quantile bins. " if binned else "")
+            + "Over every other parameter; medians over the planned tasks.",
+            "",
+        ]
+        table = robustness(data, [level.rename(name), planner], metrics)
+        lines += _table(
+            [name, "planner", "tasks", "planned", "clean", "planned %", "clean %"]
+            + [f"median {METRICS[m][0]}" for m in metrics],
+            [
+                [level_label(value), planner_name, *_robustness_cells(row, metrics)]
+                for (value, planner_name), row in table.iterrows()
+            ],
+        )
+    if figures:
+        lines += ["", "## Figures", ""]
+        lines += [f"![{file}]({file})" for file in figures]
+    return "\n".join(lines) + "\n"
+
+
+def _overview(data: pd.DataFrame, parameters: Sequence[str], swept: Sequence[str]) -> list[str]:
+    ok, violations, failed = _outcome_counts(data["status"])
+    lines = [
+        f"- tasks: {len(data)} ({ok} ok, {violations} with violations, {failed} failed); "
+        f"planners: {', '.join(data['planner'].unique())}"
+    ]
+    for name in swept:
+        values = data[name].dropna()
+        if values.nunique() <= MAX_LEVELS:
+            shown = ", ".join(level_label(v) for v in sorted(values.unique()))
+            lines.append(f"- swept: {name} ({values.nunique()} values: {shown})")
+        else:
+            lines.append(
+                f"- swept: {name} ({values.nunique()} values in "
+                f"{values.min():.4g}–{values.max():.4g})"
+            )
+    if FLAP in parameters:
+        lines.append(f"- generated bone flaps: {data[FLAP].nunique()}")
+    others = [name for name in parameters if name != FLAP and name not in swept]
+    for name in others:
+        values = data[name].dropna().astype(str).unique()
+        if len(values) == 1:
+            lines.append(f"- {name} = {values[0]} in every task")
+        else:
+            lines.append(f"- {name}: {len(values)} values (not numbers: not tabulated)")
+    return lines
+
+
+def _failures(data: pd.DataFrame) -> list[str]:
+    """The failed tasks' commonest errors (their first 80 characters), counted."""
+    failed = data[data["status"] == "failed"]
+    if failed.empty:
+        return ["No task failed."]
+    message = failed["error"].str.slice(0, 80)
+    counts = message.value_counts()
+    lines = _table(
+        ["tasks", "planners", "error (first 80 characters)"],
+        [
+            [count, _planners(failed[message == text]), f"`{text}`" if text else "—"]
+            for text, count in counts.head(_FAILURES_SHOWN).items()
+        ],
+    )
+    if len(counts) > _FAILURES_SHOWN:
+        lines += ["", f"and {len(counts) - _FAILURES_SHOWN} other messages."]
+    return lines
+
+
+def _violations(data: pd.DataFrame) -> list[str]:
+    """The limits the planned tasks break, each with how many tasks break it."""
+    status = data["status"]
+    violated = data[(status != "ok") & (status != "failed")]
+    if violated.empty:
+        return ["No planned task breaks a limit."]
+    limits = violated.assign(limit=violated["violations"].map(_limits)).explode("limit")
+    return _table(
+        ["limit", "tasks", "planners"],
+        [
+            [text, count, _planners(limits[limits["limit"] == text])]
+            for text, count in limits["limit"].dropna().value_counts().items()
+        ],
+    )
+
+
+def _outcome_counts(status: pd.Series) -> tuple[int, int, int]:
+    """(ok, with violations, failed) among the statuses."""
+    ok, failed = int((status == "ok").sum()), int((status == "failed").sum())
+    return ok, len(status) - ok - failed, failed
+
+
+def _robustness_cells(row: pd.Series, metrics: Sequence[str]) -> list[str]:
+    return [
+        f"{row['tasks']:.0f}",
+        f"{row['planned']:.0f}",
+        f"{row['clean']:.0f}",
+        f"{100 * row['planned_rate']:.1f}",
+        f"{100 * row['clean_rate']:.1f}",
+        *("—" if math.isnan(row[m]) else f"{row[m]:.4g}" for m in metrics),
+    ]
+
+
+def _limits(violations: str) -> list[str]:
+    """The limits a row's violations name: ``tool speed: 2.1 mm/s at ...; ...`` →
+    ``["tool speed", ...]``."""
+    return sorted({found.split(":")[0] for found in violations.split("; ") if found})
+
+
+def _planners(rows: pd.DataFrame) -> str:
+    """``cubic (3), toppra (1)``: how many of the rows each planner has."""
+    return ", ".join(f"{name} ({count})" for name, count in rows["planner"].value_counts().items())
+
+
+def _table(headings: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
+    """A markdown table; "|" in a cell is escaped."""
+
+    def cell(value: object) -> str:
+        return str(value).replace("|", "\\|").replace("\n", " ")
+
+    lines = ["| " + " | ".join(headings) + " |", "|" + "---|" * len(headings)]
+    return lines + ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]

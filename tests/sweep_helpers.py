@@ -1,0 +1,84 @@
+"""Stand-in task functions for the runner's tests, importable by worker processes (the
+process pool's and a Dask cluster's) and by a runner started in a subprocess:
+
+    python -c "import sweep_helpers; sweep_helpers.main()" OUT COUNT WORKERS
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from spm_opt.sweep.runner import run_sweep
+from spm_opt.sweep.task import Task
+
+
+def grid_tasks(count: int, sweep: str = "stand-in", **extra: Any) -> list[Task]:
+    """``count`` tasks with x = 0, 1, ..., and the ``extra`` parameters."""
+    return [
+        Task(
+            key=f"{sweep[:4]}{x:012x}"[-16:],
+            sweep=sweep,
+            problem_path="/nowhere.toml",
+            planner="square",
+            parameters={"x": x, **extra},
+            overrides={"x": x},
+        )
+        for x in range(count)
+    ]
+
+
+def square(task: Task) -> dict[str, Any]:
+    """Sleeps ``parameters["sleep"]`` s (default 0.2), then a row computed from x: its
+    square, NaN for odd x and infinity for x = 2; status "1 violation(s)" for x = 1."""
+    started = time.perf_counter()
+    time.sleep(task.parameters.get("sleep", 0.2))
+    x = task.parameters["x"]
+    return {
+        "key": task.key,
+        "sweep": task.sweep,
+        "planner": task.planner,
+        "parameters": task.parameters,
+        "status": "1 violation(s)" if x == 1 else "ok",
+        "error": "",
+        "solve_time_s": time.perf_counter() - started,
+        "wall_time_s": time.perf_counter() - started,
+        "square": float(x * x),
+        "odd": float("nan") if x % 2 else float(x),
+        "big": float("inf") if x == 2 else 1.0,
+    }
+
+
+def fails_on_three(task: Task) -> dict[str, Any]:
+    """``square``, but raises for x = 3 (a bug in a task function)."""
+    if task.parameters["x"] == 3:
+        raise ZeroDivisionError("x = 3 is not allowed")
+    return square(task)
+
+
+def kills_on_three(task: Task) -> dict[str, Any]:
+    """``square``, but the worker process is killed (SIGKILL) running x = 3."""
+    if task.parameters["x"] == 3:
+        time.sleep(0.1)
+        os.kill(os.getpid(), signal.SIGKILL)
+    return square(task)
+
+
+def returns_text(task: Task) -> str:
+    """Not a row: a task function's bug."""
+    return f"x = {task.parameters['x']}"
+
+
+def returns_a_set(task: Task) -> dict[str, Any]:
+    """A row with a value that JSON cannot hold: a task function's bug."""
+    return {**square(task), "square": {task.parameters["x"]}}
+
+
+def main() -> None:
+    """Run ``square`` over COUNT tasks into OUT with WORKERS processes (argv)."""
+    out, count, workers = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+    run_sweep(grid_tasks(count), out, workers=workers, progress=False, task_function=square)
