@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,7 +52,7 @@ def run_task(task: Task) -> dict[str, Any]:
 
     The row: key, sweep, planner, parameters, then the comparison's columns
     (:data:`spm_opt.comparison.COLUMNS`: status, times, the evaluator's figures, the
-    violations and the error), NaN as None.
+    violations and the error; NaN where the planner failed).
     """
     try:
         problem = load_problem(task.problem_path, task.overrides)
@@ -61,19 +60,10 @@ def run_task(task: Task) -> dict[str, Any]:
         outcome = Outcome(task.planner, 0.0, error=f"{type(error).__name__}: {error}")
     else:
         outcome = run_planners(problem, [task.planner])[0]
-    row = {k: _plain(v) for k, v in outcome.row().items()}
     return {
         "key": task.key,
         "sweep": task.sweep,
         "planner": task.planner,
         "parameters": task.parameters,
-        **row,
+        **outcome.row(),
     }
-
-
-def _plain(value: Any) -> Any:
-    """Numbers as Python floats, NaN as None: rows are standard JSON."""
-    if isinstance(value, str | bool | int) or value is None:
-        return value
-    number = float(value)
-    return None if math.isnan(number) else number
