@@ -123,6 +123,21 @@ def print_progress(prefix: str = "") -> Progress:
     return progress
 
 
+def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = None) -> Outcome:
+    """Plan ``problem`` with one planner (from ``warm_start`` when it takes one) and
+    evaluate the plan; the planner's failure is the outcome's error, never an exception."""
+    started = time.perf_counter()
+    try:
+        trajectory = plan(problem, name, warm_start)
+        return Outcome(
+            name, time.perf_counter() - started, trajectory, evaluate(problem, trajectory)
+        )
+    except Exception as error:  # noqa: BLE001 - one planner's failure is a row
+        return Outcome(
+            name, time.perf_counter() - started, error=f"{type(error).__name__}: {error}"
+        )
+
+
 def run_planners(
     problem: Problem, planners: Sequence[str] | None = None, progress: Progress | None = None
 ) -> list[Outcome]:
@@ -135,16 +150,7 @@ def run_planners(
     for index, name in enumerate(names, start=1):
         if progress is not None:
             progress(index, len(names), name, None)
-        started = time.perf_counter()
-        try:
-            trajectory = plan(problem, name)
-            outcome = Outcome(
-                name, time.perf_counter() - started, trajectory, evaluate(problem, trajectory)
-            )
-        except Exception as error:  # noqa: BLE001 - one planner's failure is a row
-            outcome = Outcome(
-                name, time.perf_counter() - started, error=f"{type(error).__name__}: {error}"
-            )
+        outcome = run_planner(problem, name)
         if progress is not None:
             progress(index, len(names), name, outcome)
         outcomes.append(outcome)

@@ -130,3 +130,26 @@ def test_bad_specs_are_one_line_errors(tmp_path, edit, expected):
         load_sweep_spec(write(tmp_path, GOOD.replace(old, new, 1)))
     message = str(caught.value)
     assert expected in message and "\n" not in message
+
+
+def test_a_warm_started_row_does_not_depend_on_what_ran_before(tmp_path):
+    """ocp-min-time starts from its anchor's plan (the base problem, planned from scratch
+    once per process), so a task gives the same row whichever tasks its worker ran."""
+    from spm_opt.sweep import task as task_module
+
+    text = GOOD.replace('["cubic", "ruckig"]', '["ocp-min-time"]')
+    text = text[: text.index("[random]")].replace('"robot.friction.mu" = [0.04, 0.24]\n', "")
+    first, second = load_sweep_spec(write(tmp_path, text)).tasks()[:2]
+    assert first.anchor == {} and second.anchor == {}
+    steady = ("wall_time_s", "solve_time_s")
+
+    task_module._anchor_plan.cache_clear()
+    alone = run_task(second)
+    task_module._anchor_plan.cache_clear()
+    run_task(first)
+    after = run_task(second)
+    assert task_module._anchor_plan.cache_info().hits >= 1
+    assert {k: v for k, v in after.items() if k not in steady} == {
+        k: v for k, v in alone.items() if k not in steady
+    }
+    assert alone["status"] == "ok"

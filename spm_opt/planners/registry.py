@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import time
 from typing import Any, Protocol, TypeVar
@@ -90,15 +91,27 @@ def settings_from_options(
     return dataclasses.replace(defaults, **values)  # type: ignore[type-var]
 
 
-def plan(problem: Problem, planner: str = "cubic") -> Trajectory:
+def takes_warm_start(planner: str) -> bool:
+    """Whether the planner called ``planner`` starts from a given plan when offered one."""
+    return "warm_start" in inspect.signature(get_planner(planner).plan).parameters
+
+
+def plan(
+    problem: Problem, planner: str = "cubic", warm_start: Trajectory | None = None
+) -> Trajectory:
     """Plan ``problem`` with the planner called ``planner`` (any name in PLANNERS).
 
-    The trajectory's metadata records the planner, the problem (file and hash), the
-    package version and the planner's statistics, with its solve time in s.
+    ``warm_start``, a plan of a similar problem, is handed to planners that take one
+    (:func:`takes_warm_start`) and ignored by the others. The trajectory's metadata records
+    the planner, the problem (file and hash), the package version and the planner's
+    statistics, with its solve time in s.
     """
     chosen = get_planner(planner)
     start = time.perf_counter()
-    trajectory = chosen.plan(problem)
+    if warm_start is not None and takes_warm_start(planner):
+        trajectory = chosen.plan(problem, warm_start=warm_start)  # type: ignore[call-arg]
+    else:
+        trajectory = chosen.plan(problem)
     elapsed = time.perf_counter() - start
     if trajectory.duration > MAX_PLAN_DURATION_S:
         raise PlanningError(

@@ -41,6 +41,7 @@ import numpy as np
 from spm_opt.errors import InputError
 from spm_opt.fields import Table, read_toml
 from spm_opt.planners import PLANNERS
+from spm_opt.planners.registry import takes_warm_start
 from spm_opt.problem import Problem, load_problem
 from spm_opt.sweep.task import Task, task_key
 
@@ -85,8 +86,11 @@ class SweepSpec:
     flaps: FlapAxis | None
     source: Path
 
-    def parameter_sets(self, problem: Problem) -> list[tuple[dict[str, Any], dict[str, Any]]]:
-        """Every (parameters, overrides) pair, in a fixed order."""
+    def parameter_sets(
+        self, problem: Problem
+    ) -> list[tuple[dict[str, Any], dict[str, Any], dict[str, Any]]]:
+        """Every (parameters, overrides, anchor) in a fixed order; the anchor is the same
+        cut with the swept values at the base problem's (the flap's overrides alone)."""
         keys = list(self.grid)
         grid = [
             dict(zip(keys, values, strict=True))
@@ -113,25 +117,30 @@ class SweepSpec:
         sets = []
         for point, draw, (flap_parameters, flap_overrides) in itertools.product(grid, draws, flaps):
             parameters = {**point, **draw, **flap_parameters}
-            sets.append((parameters, {**point, **draw, **flap_overrides}))
+            sets.append((parameters, {**point, **draw, **flap_overrides}, flap_overrides))
         return sets
 
     def tasks(self) -> list[Task]:
-        """Every task of the sweep: each parameter set with each planner."""
+        """Every task of the sweep: each parameter set with each planner; a planner that
+        takes a warm start starts from the plan of the task's anchor (see :class:`Task`)."""
         problem = load_problem(self.problem_path)
         identity = _files_hash(problem)
-        return [
-            Task(
-                key=task_key(identity, planner, overrides),
-                sweep=self.name,
-                problem_path=str(self.problem_path),
-                planner=planner,
-                parameters=parameters,
-                overrides=overrides,
-            )
-            for parameters, overrides in self.parameter_sets(problem)
-            for planner in self.planners
-        ]
+        tasks = []
+        for parameters, overrides, cut in self.parameter_sets(problem):
+            for planner in self.planners:
+                anchor = cut if takes_warm_start(planner) and overrides != cut else None
+                tasks.append(
+                    Task(
+                        key=task_key(identity, planner, overrides, anchor),
+                        sweep=self.name,
+                        problem_path=str(self.problem_path),
+                        planner=planner,
+                        parameters=parameters,
+                        overrides=overrides,
+                        anchor=anchor,
+                    )
+                )
+        return tasks
 
 
 def _files_hash(problem: Problem) -> str:

@@ -5,10 +5,13 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
-from spm_opt.comparison import Outcome, run_planners
+from spm_opt.comparison import Outcome, run_planner
+from spm_opt.planners import plan
 from spm_opt.problem import load_problem
+from spm_opt.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
@@ -30,6 +33,12 @@ class Task:
     overrides : dict
         What :func:`load_problem` gets: the parameters' keys and values, and for a
         generated flap its landmarks and segment durations.
+    anchor : dict or None
+        The overrides of the neighbour whose plan warm-starts this one (the same cut with
+        the swept values at the base problem's), for planners that take a warm start;
+        None plans from the planner's own initial guess. Every worker plans the anchor
+        from scratch once and keeps it, so a task's row does not depend on which worker
+        ran it or what it ran before.
     """
 
     key: str
@@ -38,11 +47,17 @@ class Task:
     planner: str
     parameters: dict[str, Any] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
+    anchor: dict[str, Any] | None = None
 
 
-def task_key(problem_sha256: str, planner: str, overrides: dict[str, Any]) -> str:
+def task_key(
+    problem_sha256: str,
+    planner: str,
+    overrides: dict[str, Any],
+    anchor: dict[str, Any] | None = None,
+) -> str:
     """The task's identity: 16 hex digits of SHA-256 over what decides its result."""
-    text = json.dumps([problem_sha256, planner, overrides], sort_keys=True)
+    text = json.dumps([problem_sha256, planner, overrides, anchor], sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -59,7 +74,10 @@ def run_task(task: Task) -> dict[str, Any]:
     except Exception as error:  # noqa: BLE001 - an impossible combination is a row
         outcome = Outcome(task.planner, 0.0, error=f"{type(error).__name__}: {error}")
     else:
-        outcome = run_planners(problem, [task.planner])[0]
+        warm_start = None
+        if task.anchor is not None:
+            warm_start = _anchor_plan(task.problem_path, task.planner, json.dumps(task.anchor))
+        outcome = run_planner(problem, task.planner, warm_start)
     return {
         "key": task.key,
         "sweep": task.sweep,
@@ -67,3 +85,12 @@ def run_task(task: Task) -> dict[str, Any]:
         "parameters": task.parameters,
         **outcome.row(),
     }
+
+
+@lru_cache(maxsize=16)
+def _anchor_plan(problem_path: str, planner: str, anchor: str) -> Trajectory | None:
+    """The anchor's plan, from scratch, once per process (None if it cannot be planned)."""
+    try:
+        return plan(load_problem(problem_path, json.loads(anchor)), planner)
+    except Exception:  # noqa: BLE001 - without an anchor the task starts cold
+        return None
