@@ -39,13 +39,12 @@ from spm_opt.execution.backend import (
     hardware_error_names,
 )
 from spm_opt.execution.log import LogWriter
+from spm_opt.model.params import DEG
 from spm_opt.planners.ruckig import calculate_locally
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory, package_version
 
 _LOG = logging.getLogger(__name__)
-
-DEG = math.pi / 180.0
 
 CUT_QUALITY_LIMITS = ("tool speed", "contour deviation")
 """Evaluator limits that judge the cut, not the robot's safety: not checked pre-flight."""
