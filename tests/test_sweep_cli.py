@@ -49,3 +49,13 @@ def test_bad_sweep_options_are_one_line_errors(tmp_path, capsys):
     assert err == ["spm-opt: error: --workers 0: expected a whole number of processes, >= 1"]
     assert main(["sweep", str(SMALL), "--out", str(tmp_path / "x"), "--scheduler", "x"]) == 2
     assert "--scheduler 'x'" in capsys.readouterr().err
+
+
+def test_an_unreachable_scheduler_leaves_nothing_behind(tmp_path, capsys):
+    from spm_opt.cli import main
+
+    out = tmp_path / "never"
+    assert main(["sweep", str(SMALL), "--out", str(out), "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--scheduler tcp://127.0.0.1:1: cannot connect" in err[0]
+    assert not out.exists()

@@ -213,6 +213,16 @@ def _check_scheduler(scheduler: Any) -> None:
             f"--scheduler {scheduler!r}: expected 'local' or a Dask scheduler's address "
             "tcp://HOST:PORT"
         )
+    # before the results file or the progress bar exist: an unreachable address leaves
+    # nothing behind
+    host, port = match.group(1).strip("[]"), int(match.group(2))
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as error:
+        raise InputError(
+            f"--scheduler {scheduler}: cannot connect within {CONNECT_TIMEOUT_S:g} s "
+            f"({_describe(error)})"
+        ) from None
 
 
 def _check_picklable(task_function: TaskFunction) -> None:
