@@ -142,6 +142,24 @@ class Contour:
             interior=~use_end[rows, arc],
         )
 
+    def arc_length(self, near: Nearest) -> np.ndarray:
+        """Arc length (N,), m, from the first landmark to each nearest contour point."""
+        return self.landmark_arc_lengths[near.arc] + self._length_to(near.arc, near.angle)
+
+    def progress(self, near: Nearest) -> np.ndarray:
+        """How far along the contour (N,), m, a sequence of cut points has come: the arc
+        length of each one's nearest contour point, continued across the closing landmark
+        of a closed contour (so a loop that starts at the first landmark runs from about 0
+        to about the length, and one that runs backwards goes negative)."""
+        s = self.arc_length(near)
+        if not self.closed or len(s) == 0:
+            return s
+        length = self.length
+        steps = np.diff(s)
+        steps -= length * np.round(steps / length)
+        s = s[0] + np.concatenate([[0.0], np.cumsum(steps)])
+        return s - length if s[0] > length / 2 else s
+
     def cut_points(self, directions: np.ndarray) -> np.ndarray:
         """Where the tool meets the skull along unit directions (N, 3): points (N, 3), m."""
         return self.nearest(directions).radius[:, None] * np.asarray(directions, dtype=float)

@@ -1,7 +1,11 @@
 """The one evaluator: every trajectory measured the same way, on a fine time grid.
 
-A planner's own claims are never reported; these figures are. Any limit exceeded by more
-than 0.5 % of the limit (0.01 mm for the contour tolerance) is a violation.
+A planner's own claims are never reported; these figures are. What each limit means and
+how much the evaluator allows beyond it is :mod:`spm_opt.limits`' table: 0.5 % of every
+rate-type limit, nothing beyond the joint range and the singularity margin. Besides the
+limits, a clean plan cuts the contour: it visits every landmark in order within the path
+tolerance (the contour tolerance), sweeps the whole contour inside the tube with no
+stretch left out, and never backtracks along it by more than the path tolerance.
 """
 
 from __future__ import annotations
@@ -12,25 +16,27 @@ from typing import Any
 import numpy as np
 
 from spm_opt.bounds import duration_lower_bound
+from spm_opt.limits import RULES, path_tolerance
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
+from spm_opt.report.markdown import markdown_table
 from spm_opt.trajectory import Trajectory
 
 DEFAULT_RATE_HZ = 1000.0
-RELATIVE_TOLERANCE = 0.005
-CONTOUR_TOLERANCE_M = 0.01 * MM
 
 
 @dataclass(frozen=True)
 class Violation:
-    """One limit broken: the worst value, the limit and when (units in ``unit``)."""
+    """One limit broken: the worst value, the limit and when (units in ``unit``);
+    ``rule`` names its entry in :data:`spm_opt.limits.RULES`."""
 
     limit: str
     worst: float
     allowed: float
     unit: str
     time_s: float
+    rule: str
 
     def __str__(self) -> str:
         return (
@@ -69,6 +75,8 @@ class Report:
     tool_speed_cv: float
     landmark_errors_mm: list[dict[str, Any]]
     max_landmark_error_mm: float
+    coverage_gap_mm: float
+    max_backtrack_mm: float
     min_singularity_margin: float
     contour_length_mm: float
     duration_lower_bound_s: float
@@ -102,8 +110,7 @@ class Report:
                     _format(visit["error_mm"]),
                 )
             )
-        lines = ["| figure | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in rows]
-        lines.append("")
+        lines = [*markdown_table(("figure", "value"), rows), ""]
         if self.violations:
             lines.append(f"**{len(self.violations)} violation(s):**")
             lines += [f"- {v}" for v in self.violations]
@@ -142,56 +149,79 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     qdd = trajectory.acceleration(t)
     jerk = trajectory.jerk(t)
     directions = kinematics.forward_kinematics(q, 1.0)
-    deviation = contour.deviation(directions)
+    near = contour.nearest(directions)
+    deviation = 2.0 * near.radius * np.sin(near.offset / 2.0)
     tool_speed = contour.joint_tool_speed(q, qd)
     margins = kinematics.singularity_margins(q)
     torque = dynamics.actuator_torque(robot, q, qd, qdd)
-    continuous_torque = robot.actuator.continuous_torque_nm
+    current = robot.actuator.current_map.current(torque)
     torque_limit = problem.max_joint_torque
     peak_torque = np.max(np.abs(torque), axis=0)
-    peak_current = np.max(np.abs(robot.actuator.current_map.current(torque)), axis=0)
+    peak_current = np.max(np.abs(current), axis=0)
     duration = t[-1] - t[0]
     mean_speed = float(_time_mean(tool_speed, t))
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
-    landmark_errors = _landmark_errors(problem, trajectory, t, directions)
     lower_bound = duration_lower_bound(problem)
     step_times, steps = trajectory.acceleration_steps()
+    path = path_tolerance(problem)
+    tube = limits.contour_tolerance
+    in_tube = (
+        np.ones(len(t), bool)
+        if tube is None
+        else deviation <= RULES["contour deviation"].allowed(tube)
+    )
+    progress = contour.progress(near)
+    gap, gap_at = _largest_gap(progress, in_tube, contour.length)
+    backtrack = np.maximum.accumulate(progress) - progress
+    landmark_errors = _landmark_errors(problem, trajectory, t, directions, path)
 
     checks = _Checks(t)
     for joint in range(2):
         name = f"theta{joint + 1}"
         low, high = robot.joint_range[joint]
-        span = (high - low) * RELATIVE_TOLERANCE
-        checks.above(f"{name} upper range", q[:, joint] / DEG, high / DEG, span / DEG, "deg")
-        checks.below(f"{name} lower range", q[:, joint] / DEG, low / DEG, span / DEG, "deg")
-        checks.relative(f"{name} speed", np.abs(qd[:, joint]), limits.max_joint_speed, "rad/s")
-        checks.relative(
-            f"{name} acceleration", np.abs(qdd[:, joint]), limits.max_joint_acceleration, "rad/s^2"
+        angle = q[:, joint] / DEG
+        checks.upper("joint range", f"{name} upper range", angle, high / DEG)
+        checks.lower("joint range", f"{name} lower range", angle, low / DEG)
+        checks.upper("joint speed", f"{name} speed", np.abs(qd[:, joint]), limits.max_joint_speed)
+        checks.upper(
+            "joint acceleration",
+            f"{name} acceleration",
+            np.abs(qdd[:, joint]),
+            limits.max_joint_acceleration,
         )
-        checks.relative(f"{name} jerk", np.abs(jerk[:, joint]), limits.max_joint_jerk, "rad/s^3")
+        checks.upper("joint jerk", f"{name} jerk", np.abs(jerk[:, joint]), limits.max_joint_jerk)
         if limits.max_joint_jerk is not None:
-            allowed = limits.max_joint_jerk / rate_hz
-            step = np.abs(steps[:, joint])
-            slack = RELATIVE_TOLERANCE * allowed
-            checks.above(f"{name} acceleration step", step, allowed, slack, "rad/s^2", step_times)
-        checks.relative(f"{name} torque", np.abs(torque[:, joint]), torque_limit, "N*m")
-    if limits.max_tool_speed is not None:
-        checks.relative("tool speed", tool_speed / MM, limits.max_tool_speed / MM, "mm/s")
-    if limits.contour_tolerance is not None:
-        checks.above(
-            "contour deviation",
-            deviation / MM,
-            limits.contour_tolerance / MM,
-            CONTOUR_TOLERANCE_M / MM,
-            "mm",
+            checks.upper(
+                "acceleration step",
+                f"{name} acceleration step",
+                np.abs(steps[:, joint]),
+                limits.max_joint_jerk / rate_hz,
+                step_times,
+            )
+        checks.upper("actuator torque", f"{name} torque", np.abs(torque[:, joint]), torque_limit)
+        checks.upper(
+            "motor current",
+            f"{name} current",
+            np.abs(current[:, joint]),
+            robot.actuator.continuous_current_a,
         )
-    checks.below(
-        "singularity margin",
-        margins,
-        robot.min_singularity_margin,
-        RELATIVE_TOLERANCE * robot.min_singularity_margin,
-        "",
-    )
+    if limits.max_tool_speed is not None:
+        checks.upper("tool speed", "tool speed", tool_speed / MM, limits.max_tool_speed / MM)
+    if tube is not None:
+        checks.upper("contour deviation", "contour deviation", deviation / MM, tube / MM)
+    for visit in landmark_errors:
+        checks.upper(
+            "landmark visit",
+            f"landmark {visit['landmark']} visit",
+            np.array([visit["error_mm"]]),
+            path / MM,
+            np.array([visit["time_s"]]),
+        )
+    reached = np.flatnonzero(progress >= gap_at)
+    gap_time = t[reached[0]] if reached.size else t[-1]
+    checks.upper("coverage", "coverage", np.array([gap / MM]), path / MM, np.array([gap_time]))
+    checks.upper("backtracking", "backtracking", backtrack / MM, path / MM)
+    checks.lower("singularity margin", "singularity margin", margins, robot.min_singularity_margin)
 
     return Report(
         planner=trajectory.metadata.get("planner"),
@@ -208,13 +238,15 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
         tool_speed_cv=float(speed_std / mean_speed) if mean_speed > 0 else float("nan"),
         landmark_errors_mm=landmark_errors,
         max_landmark_error_mm=max(v["error_mm"] for v in landmark_errors),
+        coverage_gap_mm=float(gap / MM),
+        max_backtrack_mm=float(np.max(backtrack) / MM),
         min_singularity_margin=float(np.min(margins)),
         contour_length_mm=contour.length / MM,
         duration_lower_bound_s=lower_bound,
         duration_over_lower_bound=trajectory.duration / lower_bound,
         peak_torque_nm=peak_torque.tolist(),
         rms_torque_nm=np.sqrt(_time_mean(torque**2, t)).tolist(),
-        torque_margin=(1.0 - peak_torque / continuous_torque).tolist(),
+        torque_margin=(1.0 - peak_torque / robot.actuator.continuous_torque_nm).tolist(),
         peak_current_a=peak_current.tolist(),
         current_margin=(1.0 - peak_current / robot.actuator.continuous_current_a).tolist(),
         energy_j=float(np.trapezoid(np.sum(np.abs(torque * qd), axis=1), t)),
@@ -224,51 +256,78 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
 
 
 class _Checks:
-    """Collects violations: the worst sample above a limit plus its allowance."""
+    """Collects violations: the worst sample beyond a limit and its rule's allowance."""
 
     def __init__(self, t: np.ndarray) -> None:
         self.t = t
         self.found: list[Violation] = []
 
-    def above(
+    def upper(
         self,
-        limit: str,
+        rule: str,
+        label: str,
         values: np.ndarray,
-        allowed: float,
-        slack: float,
-        unit: str,
+        limit: float | None,
         times: np.ndarray | None = None,
     ) -> None:
-        """Record the worst of ``values`` (at ``times``, default the grid) above the limit."""
-        times = self.t if times is None else times
+        """Record the worst of ``values`` (at ``times``, default the grid) above ``limit``
+        by more than the rule allows; ``None``: not limited."""
+        if limit is None or len(values) == 0:
+            return
         worst = int(np.argmax(values))
-        if values[worst] > allowed + slack:
-            self.found.append(
-                Violation(limit, float(values[worst]), float(allowed), unit, float(times[worst]))
-            )
+        if values[worst] > RULES[rule].allowed(limit):
+            times = self.t if times is None else times
+            self._add(rule, label, values[worst], limit, times[worst])
 
-    def below(
-        self, limit: str, values: np.ndarray, allowed: float, slack: float, unit: str
-    ) -> None:
+    def lower(self, rule: str, label: str, values: np.ndarray, limit: float) -> None:
+        """Record the worst of ``values`` below ``limit`` by more than the rule allows."""
         worst = int(np.argmin(values))
-        if values[worst] < allowed - slack:
-            self.found.append(
-                Violation(limit, float(values[worst]), float(allowed), unit, float(self.t[worst]))
-            )
+        if values[worst] < RULES[rule].allowed(limit, upper=False):
+            self._add(rule, label, values[worst], limit, self.t[worst])
 
-    def relative(self, limit: str, values: np.ndarray, allowed: float | None, unit: str) -> None:
-        if allowed is not None:
-            self.above(limit, values, allowed, RELATIVE_TOLERANCE * allowed, unit)
+    def _add(self, rule: str, label: str, worst: float, limit: float, time: float) -> None:
+        self.found.append(
+            Violation(label, float(worst), float(limit), RULES[rule].unit, float(time), rule)
+        )
+
+
+def _largest_gap(progress: np.ndarray, in_tube: np.ndarray, length: float) -> tuple[float, float]:
+    """The longest stretch of the contour, m, that the cut never swept while in the tube,
+    and the arc length, m, where it starts.
+
+    Each step between consecutive samples that are both in the tube sweeps the contour
+    between their nearest points' arc lengths (``progress``); the stretches of [0, length]
+    that no such step sweeps (a plan that stands still, stops early, or leaves the tube
+    to skip a stretch) are the gaps.
+    """
+    swept = in_tube[:-1] & in_tube[1:]
+    low = np.clip(np.minimum(progress[:-1], progress[1:])[swept], 0.0, length)
+    high = np.clip(np.maximum(progress[:-1], progress[1:])[swept], 0.0, length)
+    if low.size == 0:
+        return length, 0.0
+    order = np.argsort(low)
+    low, reached = low[order], np.maximum.accumulate(high[order])
+    starts = np.concatenate([[0.0], reached])
+    gaps = np.concatenate([low, [length]]) - starts
+    worst = int(np.argmax(gaps))
+    return float(max(gaps[worst], 0.0)), float(starts[worst])
 
 
 def _landmark_errors(
-    problem: Problem, trajectory: Trajectory, t: np.ndarray, directions: np.ndarray
+    problem: Problem,
+    trajectory: Trajectory,
+    t: np.ndarray,
+    directions: np.ndarray,
+    tolerance: float,
 ) -> list[dict[str, Any]]:
-    """Distance on the skull from each landmark visit, at the time the plan claims for it,
-    or at the closest approach when the plan does not say."""
+    """Distance on the skull from each landmark visit, in visiting order: at the time the
+    plan claims for it, or, when the plan does not say, at the closest approach of the
+    first pass within ``tolerance`` (m) after the previous visit (the closest approach
+    after it, when the cut never comes that close)."""
     visits = problem.visit_order
     claimed = trajectory.landmark_times
     errors = []
+    earliest = 0
     for k, index in enumerate(visits):
         landmark = problem.landmarks[index]
         radius = np.linalg.norm(landmark)
@@ -278,9 +337,17 @@ def _landmark_errors(
             direction = kinematics.forward_kinematics(trajectory.position([time]), 1.0)[0]
             error = radius * np.linalg.norm(direction - unit)
         else:
-            distances = radius * np.linalg.norm(directions - unit, axis=1)
-            closest = int(np.argmin(distances))
-            time, error = float(t[closest]), distances[closest]
+            distances = radius * np.linalg.norm(directions[earliest:] - unit, axis=1)
+            near = np.flatnonzero(distances <= RULES["landmark visit"].allowed(tolerance))
+            if near.size:  # the closest approach of the first pass that comes near enough
+                left = np.flatnonzero(np.diff(near) > 1)
+                end = near[left[0]] + 1 if left.size else near[-1] + 1
+                closest = near[0] + int(np.argmin(distances[near[0] : end]))
+            else:
+                closest = int(np.argmin(distances))
+            time, error = float(t[earliest + closest]), distances[closest]
+            if near.size:
+                earliest += closest
         errors.append(
             {
                 "landmark": problem.landmark_names[index],

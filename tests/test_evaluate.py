@@ -84,6 +84,7 @@ def test_baseline_report(paper_problem, baseline):
         "theta2 acceleration step",
         "tool speed",
         "contour deviation",
+        "coverage",  # 7 mm off a 0.1 mm tube: long stretches of the contour are not cut
     ]
     start = baseline.local_coefficients()[1, 0] * 2  # q̈(0) = 2 × the t² coefficient
     assert report.max_acceleration_step_rad_s2 == pytest.approx(np.abs(start), rel=1e-9)
@@ -181,7 +182,33 @@ def test_within_half_a_percent_is_not_a_violation(paper_problem, baseline):
     assert [v.limit for v in report.violations] == ["theta1 speed"]
 
 
-def test_joint_range_violation(paper_problem, baseline):
+def test_the_contour_tube_gets_the_same_half_percent(paper_problem, baseline):
+    """0.5 % of the tube, not the 10 % it once had: the tube is set just below and just
+    above the plan's own largest deviation."""
+    deviation = so.evaluate(paper_problem, baseline).max_contour_deviation_mm * MM
+    names = []
+    for factor in (1.004, 1.006):
+        limits = dataclasses.replace(paper_problem.limits, contour_tolerance=deviation / factor)
+        report = so.evaluate(dataclasses.replace(paper_problem, limits=limits), baseline)
+        names.append([v.limit for v in report.violations])
+    assert "contour deviation" not in names[0]
+    assert "contour deviation" in names[1]
+
+
+def test_the_joint_range_is_hard(paper_problem, baseline):
+    """A range that ends 0.01° inside the plan's extreme is a violation (0.5 % of a 120°
+    span, 0.6°, once passed)."""
+    low = np.degrees(np.min(baseline.position(baseline.time_grid(1000.0))[:, 1]))
+    robot = dataclasses.replace(
+        paper_problem.robot, joint_range=np.radians([[-60.0, 60.0], [low + 0.01, 60.0]])
+    )
+    report = so.evaluate(dataclasses.replace(paper_problem, robot=robot), baseline)
+    found = next(v for v in report.violations if v.limit == "theta2 lower range")
+    assert found.rule == "joint range"
+    assert found.worst == pytest.approx(low, abs=1e-3)
+
+
+def test_the_joint_range_violation(paper_problem, baseline):
     robot = dataclasses.replace(paper_problem.robot, joint_range=np.radians([[-60, 60], [-29, 0]]))
     report = so.evaluate(dataclasses.replace(paper_problem, robot=robot), baseline)
     assert "theta2 lower range" in [v.limit for v in report.violations]
@@ -193,3 +220,86 @@ def test_singularity_margin_is_reported(paper_problem, baseline):
     assert report.min_singularity_margin == pytest.approx(
         kinematics.singularity_margins(q).min(), rel=1e-6
     )
+
+
+@pytest.fixture(scope="module")
+def clean_plan(paper_problem):
+    """toppra's plan of the paper's problem: clean under every rule."""
+    trajectory = so.plan(paper_problem, "toppra")
+    assert so.evaluate(paper_problem, trajectory).violations == []
+    return trajectory
+
+
+def _names(report):
+    return {v.limit for v in report.violations}
+
+
+def test_a_plan_that_stands_still_is_not_clean(paper_problem):
+    """40 s at A1: within every rate limit, but no cut at all."""
+    t = np.linspace(0.0, 40.0, 5)
+    q = np.tile(paper_problem.waypoint_angles[0], (5, 1))
+    still = so.Trajectory.from_samples(t, q, np.zeros_like(q), np.zeros_like(q))
+    report = so.evaluate(paper_problem, still)
+    assert _names(report) == {
+        "coverage",
+        "landmark A2 visit",
+        "landmark A3 visit",
+        "landmark A4 visit",
+    }
+    assert report.coverage_gap_mm == pytest.approx(report.contour_length_mm, rel=1e-9)
+
+
+def test_a_plan_that_stops_short_of_the_loop_is_not_clean(paper_problem, clean_plan):
+    """The clean plan up to 90 % of its way round, the rest never cut."""
+    t = clean_plan.time_grid(100.0)
+    cut = paper_problem.contour.progress(
+        paper_problem.contour.nearest(clean_plan.cut_points(paper_problem.contour, t))
+    )
+    stop = t[np.argmax(cut >= 0.9 * paper_problem.contour.length)]
+    t = t[t <= stop]
+    q, qd, qdd = clean_plan.position(t), clean_plan.velocity(t), clean_plan.acceleration(t)
+    short = so.Trajectory.from_samples(t, q, qd, qdd)
+    report = so.evaluate(paper_problem, short)
+    assert "coverage" in _names(report)
+    assert "landmark A1 visit" in _names(report)  # the loop never closes
+    assert report.coverage_gap_mm == pytest.approx(0.1 * report.contour_length_mm, rel=0.01)
+
+
+def test_a_plan_that_skips_a_landmark_is_not_clean(paper_problem):
+    """The clean plan of the same flap without A3, judged against the flap with it."""
+    without = dataclasses.replace(
+        paper_problem,
+        landmark_names=("A1", "A2", "A4"),
+        landmarks=paper_problem.landmarks[[0, 1, 3]],
+        segment_durations=np.array([10.0, 10.0, 10.0]),
+    )
+    report = so.evaluate(paper_problem, so.plan(without, "toppra"))
+    assert {"landmark A3 visit", "coverage"} <= _names(report)
+
+
+def test_a_plan_that_runs_the_loop_backwards_is_not_clean(paper_problem):
+    """The clean plan of the loop A1 → A4 → A3 → A2 → A1, against A1 → A2 → A3 → A4."""
+    backwards = dataclasses.replace(
+        paper_problem,
+        landmark_names=("A1", "A4", "A3", "A2"),
+        landmarks=paper_problem.landmarks[[0, 3, 2, 1]],
+    )
+    trajectory = so.plan(backwards, "toppra")
+    assert so.evaluate(backwards, trajectory).violations == []
+    report = so.evaluate(paper_problem, trajectory)
+    assert {"backtracking", "landmark A2 visit", "landmark A4 visit"} <= _names(report)
+    assert report.max_backtrack_mm == pytest.approx(report.contour_length_mm, rel=0.01)
+
+
+def test_landmark_visits_are_searched_in_order_when_the_plan_does_not_say(
+    paper_problem, clean_plan
+):
+    """Without its claimed times the clean plan still visits A1, A2, A3, A4, A1 in order,
+    each once, and the times found are the claimed ones."""
+    metadata = {k: v for k, v in clean_plan.metadata.items() if k != "landmark_times_s"}
+    anonymous = so.Trajectory(clean_plan._q, metadata)
+    assert anonymous.landmark_times is None
+    report = so.evaluate(paper_problem, anonymous)
+    assert report.violations == []
+    found = [visit["time_s"] for visit in report.landmark_errors_mm]
+    assert found == pytest.approx(clean_plan.landmark_times.tolist(), abs=2e-3)

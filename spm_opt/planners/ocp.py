@@ -12,10 +12,10 @@ ends at rest.
 
 Constraints, from the one model and the problem's limits, at every node and at
 ``checks_per_interval`` evenly spaced points inside every interval (the torque, the costly
-rows, at the nodes and midpoints): actuator torque (Lagrange model, smooth friction,
-payload) within ``max_joint_torque``; joint speed, acceleration and jerk bounds; the joint
-range; the
-tool's speed on the skull (|Ṗ|² = ρ²|ṗ|² + ρ̇², as the evaluator measures it) at most
+rows, at the nodes and midpoints): the load torque with the rotor's J q̈ (Lagrange model,
+smooth friction, payload) within :mod:`spm_opt.limits`' bound for it; joint speed,
+acceleration and jerk bounds; the joint range; the tool's speed on the skull
+(|Ṗ|² = ρ²|ṗ|² + ρ̇², as the evaluator measures it) at most
 ``max_tool_speed``; and the cut point within ``contour_tolerance`` of the segment's
 great-circle arc (the chord 2ρ sin(δ/2), δ the angle off the arc's plane) and between its
 end landmarks. Each limit keeps a reserve of ``margin`` (a fraction) for what happens
@@ -51,6 +51,8 @@ import numpy as np
 
 from spm_opt.bounds import segment_lower_bounds
 from spm_opt.errors import PlanningError
+from spm_opt.evaluate import Violation, evaluate
+from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds, planner_bounds
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import MM
 from spm_opt.planners.contour_guess import segment_motion
@@ -87,6 +89,10 @@ class OcpSettings:
     max_iterations : int
     tolerance : float
         IPOPT's convergence tolerance.
+    acceptable_iterations : int
+        IPOPT's ``acceptable_iter``: after this many iterations in a row at its looser
+        "acceptable" level it stops early; such a stop is never a plan, but the start of a
+        strict re-solve (with 0: never stop early).
     time_weight, energy_weight, jerk_weight : float
         Weights of the total time (s), ∫τᵀτ dt and ∫jerk² dt, each divided by its value at
         the initial guess so that the weights compare like with like.
@@ -101,6 +107,7 @@ class OcpSettings:
     timing: str = "total"
     max_iterations: int = 300
     tolerance: float = 1e-7
+    acceptable_iterations: int = 15
     time_weight: float = 0.0
     energy_weight: float = 0.0
     jerk_weight: float = 0.0
@@ -112,6 +119,7 @@ class OcpSettings:
         "checks_per_interval": (1, 9),
         "margin": (0.0, 0.5),
         "max_iterations": (1, 100_000),
+        "acceptable_iterations": (0, 100_000),
         "tolerance": (1e-12, 1e-2),
         "time_weight": (0.0, 1e6),
         "energy_weight": (0.0, 1e6),
@@ -128,6 +136,19 @@ class OcpSettings:
 TIMINGS = ("free", "total", "segments")
 OPTION_KEYS = tuple(f.name for f in dataclasses.fields(OcpSettings))
 
+
+CONVERGED = "Solve_Succeeded"
+"""The only IPOPT status that makes a plan."""
+ACCEPTABLE = "Solved_To_Acceptable_Level"
+"""IPOPT's early stop at its looser acceptable level (constraints within 1e-2 in their own
+units: wider than the contour tube in mm²), which CasADi counts as a success."""
+_WARM_START = {
+    "warm_start_init_point": "yes",
+    "mu_init": 1e-6,
+    "warm_start_bound_push": 1e-9,
+    "warm_start_mult_bound_push": 1e-9,
+}
+"""IPOPT's options to continue from a solution and its multipliers (the strict re-solve)."""
 
 CORNER_SHARE = 0.05
 """Share of a segment's duration each corner phase takes in the initial guess."""
@@ -306,6 +327,7 @@ def _nlp(
     n_robot = dynamics._model().torque.size1_in(3)
     arcs = ca.MX.sym("arcs", _ARC_PARAMETERS, segments)
     robot, weights, scales = ca.MX.sym("robot", n_robot), ca.MX.sym("w", 3), ca.MX.sym("s", 3)
+    rotor = ca.MX.sym("rotor")  # the actuators' reflected rotor inertia, kg·m²
     node_arcs = arcs @ ca.DM(np.eye(segments)[:, grid.node_segments()])
     inner_arcs = arcs @ ca.DM(np.eye(segments)[:, grid.inner_segments(checks)])
 
@@ -336,8 +358,10 @@ def _nlp(
     if with_torque:
         torque = _torque_function()
         at_nodes = torque.map(m + 1)(states[0:2, :], states[2:4, :], states[4:6, :], robot)
+        at_nodes += rotor * states[4:6, :]
         middle = _advance(before, jerks, h / 2)
         at_middle = torque.map(m)(middle[0:2, :], middle[2:4, :], middle[4:6, :], robot)
+        at_middle += rotor * middle[4:6, :]
         blocks.append(("torque at nodes", ca.vec(at_nodes), 2, m + 1))
         blocks.append(("torque at midpoints", ca.vec(at_middle), 2, m))
         squares_nodes, squares_middle = ca.sum1(at_nodes**2), ca.sum1(at_middle**2)
@@ -355,7 +379,7 @@ def _nlp(
         groups.append((name, start, size, points))
         start += value.numel()
     x = ca.vertcat(ca.vec(states), ca.vec(jerks), durations)
-    parameters = ca.vertcat(ca.vec(arcs), robot, weights, scales)
+    parameters = ca.vertcat(ca.vec(arcs), robot, rotor, weights, scales)
     layout = _Layout(grid=grid, checks=checks, groups=tuple(groups))
     options = {
         "ipopt": {
@@ -364,6 +388,8 @@ def _nlp(
             "print_level": settings.print_level,
             "sb": "yes",
             "mu_strategy": "adaptive",
+            "acceptable_iter": settings.acceptable_iterations,
+            **(_WARM_START if settings.acceptable_iterations == 0 else {}),
         },
         "print_time": False,
         "expand": not with_torque,
@@ -396,7 +422,8 @@ def _arcs(problem: Problem) -> np.ndarray:
 
 def _parameters(problem: Problem, weights: list[float], scales: np.ndarray) -> np.ndarray:
     robot = dynamics.parameter_vector(problem.robot).ravel()
-    return np.concatenate([_arcs(problem).ravel(), robot, weights, scales])
+    rotor = [problem.robot.actuator.rotor_inertia_kg_m2]
+    return np.concatenate([_arcs(problem).ravel(), robot, rotor, weights, scales])
 
 
 def _guess(
@@ -433,13 +460,13 @@ def _check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.n
             f"contour_tolerance_mm = {limits.contour_tolerance / MM:g}: the cut would have to "
             f"turn every corner exactly; give at least {MIN_CONTOUR_TOLERANCE / MM:g} mm"
         )
-    torque_limit = problem.max_joint_torque
+    torque_limit = planner_bounds(problem, margin).load_torque
     for visit in (0, len(names) - 1):
         holding = dynamics.gravity_torque(problem.robot, problem.waypoint_angles[visit])[0]
-        if np.max(np.abs(holding)) > torque_limit * (1 - margin):
+        if np.max(np.abs(holding)) > torque_limit:
             joint = int(np.argmax(np.abs(holding)))
             raise PlanningError(
-                f"max_joint_torque_nm = {torque_limit:g}: holding the robot at rest at "
+                f"max_joint_torque_nm = {problem.max_joint_torque:g}: holding the robot at rest at "
                 f"{names[visit]} takes {abs(holding[joint]):.4g} N·m on actuator {joint + 1} "
                 "against gravity"
             )
@@ -466,22 +493,21 @@ def _check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.n
 
 
 def _bounds(
-    problem: Problem, layout: _Layout, settings: OcpSettings, durations: np.ndarray
+    problem: Problem, layout: _Layout, bounds: PlannerBounds, timing: str, durations: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """``durations``: the initial phase durations (D,), s."""
-    """lbx, ubx, lbg, ubg for one problem, each limit less the margin."""
-    limits, robot = problem.limits, problem.robot
-    keep = 1.0 - settings.margin
-    speed = limits.max_joint_speed * keep
-    acceleration = (limits.max_joint_acceleration or UNLIMITED) * keep
-    jerk = (limits.max_joint_jerk or UNLIMITED) * keep
+    """lbx, ubx, lbg, ubg for one problem within ``bounds`` (the problem's limits as
+    :mod:`spm_opt.limits` translates them for a planner); ``durations``: the initial phase
+    durations (D,), s."""
+    speed = bounds.joint_speed
+    acceleration = bounds.joint_acceleration or UNLIMITED
+    jerk = bounds.joint_jerk or UNLIMITED
     grid = layout.grid
     m, inner = grid.intervals, layout.checks * grid.intervals
     low = np.tile(
-        [*robot.joint_range[:, 0], -speed, -speed, -acceleration, -acceleration], (m + 1, 1)
+        [*bounds.joint_range[:, 0], -speed, -speed, -acceleration, -acceleration], (m + 1, 1)
     )
     high = -low
-    high[:, 0:2] = robot.joint_range[:, 1]
+    high[:, 0:2] = bounds.joint_range[:, 1]
     landmarks = grid.landmark_nodes
     low[landmarks, 0:2] = high[landmarks, 0:2] = problem.waypoint_angles
     low[[0, -1], 2:6] = high[[0, -1], 2:6] = 0.0
@@ -490,14 +516,14 @@ def _bounds(
     ubx = np.concatenate([high.ravel(), np.full(2 * m, jerk), np.full(3 * grid.segments, longest)])
     segments = (0.5 * segment_lower_bounds(problem), np.full(grid.segments, np.inf))
     total = (-np.inf, np.inf)
-    if settings.timing == "segments":
+    if timing == "segments":
         segments = (problem.segment_durations, problem.segment_durations)
-    elif settings.timing == "total":
+    elif timing == "total":
         total = (np.sum(problem.segment_durations),) * 2
 
-    torque = problem.max_joint_torque * keep
-    tool = (limits.max_tool_speed or UNLIMITED) * keep / MM
-    tolerance = (limits.contour_tolerance or UNLIMITED) * keep / MM
+    torque = bounds.load_torque
+    tool = (bounds.tool_speed or UNLIMITED) / MM
+    tolerance = (bounds.contour_tolerance or UNLIMITED) / MM
     path_low = np.array([-np.inf, -np.inf, 0.0, 0.0])
     path_high = np.array([tool**2, tolerance**2, np.inf, np.inf])
     node_low, node_high = np.tile(path_low, (m + 1, 1)), np.tile(path_high, (m + 1, 1))
@@ -600,19 +626,44 @@ class OcpPlanner:
         grid = _grid(len(durations), settings)
         x0 = _guess(problem, grid, durations, warm_start)
         with_torque = settings.energy_weight > 0.0
-        x, statistics = self._solve(problem, settings, with_torque, x0)
-        if not with_torque and _torque_exceeded(problem, grid, settings, x):
-            x, again = self._solve(problem, settings, True, x)
-            again["solve_time_s"] += statistics["solve_time_s"]
-            again["iterations"] += statistics["iterations"]
-            statistics = again
-        statistics["settings"] = dataclasses.asdict(settings)
+        bounds = planner_bounds(problem, settings.margin)
+        x, statistics = self._solve(problem, settings, bounds, with_torque, x0)
+        for round_ in range(1, REFINEMENTS + 2):
+            if not with_torque and _torque_exceeded(problem, grid, bounds, x):
+                with_torque = True
+                x, again = self._solve(problem, settings, bounds, with_torque, x)
+                statistics = _added(statistics, again)
+            statistics["refinements"] = round_ - 1
+            trajectory = self._trajectory(problem, grid, x, statistics, settings)
+            broken = evaluate(problem, trajectory).violations
+            if not broken:
+                return trajectory
+            if round_ > REFINEMENTS:
+                break
+            bounds = _tightened(bounds, broken)
+            x, again = self._solve(problem, settings, bounds, with_torque, x)
+            statistics = _added(statistics, again)
+        raise PlanningError(
+            f"{self.name}: the evaluator still finds {'; '.join(map(str, broken))} after "
+            f"{REFINEMENTS} re-solves with tighter bounds; raise planner.{self.name}."
+            "checks_per_interval or margin"
+        )
+
+    def _trajectory(
+        self,
+        problem: Problem,
+        grid: _Grid,
+        x: np.ndarray,
+        statistics: dict[str, Any],
+        settings: OcpSettings,
+    ) -> Trajectory:
+        """The plan x describes, with its landmark times and the solver's statistics."""
         _, _, durations = grid.split(x)
         landmark_times = grid.node_times(durations)[grid.landmark_nodes]
         metadata = {
             "landmark_times_s": landmark_times.tolist(),
             "landmarks": problem.visit_names,
-            "statistics": statistics,
+            "statistics": {**statistics, "settings": dataclasses.asdict(settings)},
         }
         return grid.trajectory(x, metadata)
 
@@ -620,6 +671,7 @@ class OcpPlanner:
         self,
         problem: Problem,
         settings: OcpSettings,
+        bounds: PlannerBounds,
         with_torque: bool,
         x0: np.ndarray,
     ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -631,28 +683,36 @@ class OcpPlanner:
         at_guess = terms(x0, _parameters(problem, weights, scales))
         scales = np.maximum(np.abs([float(v) for v in at_guess]), 1e-9)
         parameters = _parameters(problem, weights, scales)
-        bounds = _bounds(problem, layout, settings, layout.grid.split(x0)[2])
+        box = _bounds(problem, layout, bounds, settings.timing, layout.grid.split(x0)[2])
         started = time.perf_counter()
-        solution = solver(x0=x0, p=parameters, **bounds)
-        wall = time.perf_counter() - started
+        solution = solver(x0=x0, p=parameters, **box)
         stats = solver.stats()
+        statuses, iterations = [stats["return_status"]], int(stats["iter_count"])
+        if stats["return_status"] == ACCEPTABLE:  # loose: re-solve strictly from there
+            strict = dataclasses.replace(settings, acceptable_iterations=0)
+            solver = _nlp(len(problem.segment_durations), strict, with_torque)[0]
+            warm = {"x0": solution["x"], "lam_x0": solution["lam_x"], "lam_g0": solution["lam_g"]}
+            solution = solver(**warm, p=parameters, **box)
+            stats = solver.stats()
+            statuses.append(stats["return_status"])
+            iterations += int(stats["iter_count"])
+        wall = time.perf_counter() - started
         x, g = solution["x"].full().ravel(), solution["g"].full().ravel()
-        most = _worst_constraint(layout, g, bounds, problem.visit_names)
-        if not stats["success"]:
+        most = _worst_constraint(layout, g, box, problem.visit_names)
+        if stats["return_status"] != CONVERGED:
             raise PlanningError(
-                f"{self.name}: IPOPT stopped with {stats['return_status']} after "
-                f"{stats['iter_count']} iterations; most violated: {most}"
+                f"{self.name}: IPOPT stopped with {' then '.join(statuses)} after "
+                f"{iterations} iterations; most violated: {most}"
             )
         total_time, effort, jerk_integral = (float(v) for v in terms(x, parameters))
         return x, {
             "status": stats["return_status"],
-            "iterations": int(stats["iter_count"]),
+            "statuses": statuses,
+            "iterations": iterations,
             "solve_time_s": wall,
             "function_time_s": sum(v for k, v in stats.items() if k.startswith("t_wall_nlp")),
             "construction_time_s": construction,
-            "constraint_violation": float(
-                max(np.max(bounds["lbg"] - g), np.max(g - bounds["ubg"]), 0.0)
-            ),
+            "constraint_violation": float(max(np.max(box["lbg"] - g), np.max(g - box["ubg"]), 0.0)),
             "most_binding": most,
             "torque_in_nlp": with_torque,
             "duration_s": total_time,
@@ -661,15 +721,59 @@ class OcpPlanner:
         }
 
 
-def _torque_exceeded(problem: Problem, grid: _Grid, settings: OcpSettings, x: np.ndarray) -> bool:
-    """Whether the model's torques (smooth friction) at the nodes and midpoints of x (where
-    the NLP would impose them) exceed the torque limit less the margin."""
+def _torque_exceeded(problem: Problem, grid: _Grid, bounds: PlannerBounds, x: np.ndarray) -> bool:
+    """Whether the load torques (smooth friction, rotor inertia) at the nodes and midpoints
+    of x (where the NLP would impose them) exceed ``bounds``' torque bound."""
     motion = grid.trajectory(x, {})
     nodes = grid.node_times(grid.split(x)[2])
     t = np.concatenate([nodes, (nodes[:-1] + nodes[1:]) / 2])
-    state = (motion.position(t), motion.velocity(t), motion.acceleration(t))
-    torque = dynamics.inverse_dynamics(problem.robot, *state, exact=False)
-    return bool(np.max(np.abs(torque)) > problem.max_joint_torque * (1.0 - settings.margin))
+    q, qd, qdd = motion.position(t), motion.velocity(t), motion.acceleration(t)
+    torque = dynamics.inverse_dynamics(problem.robot, q, qd, qdd, exact=False)
+    return bool(np.max(np.abs(torque + bounds.rotor_inertia * qdd)) > bounds.load_torque)
+
+
+REFINEMENTS = 3
+"""Re-solves, each with tighter bounds for whatever the evaluator found exceeded between
+the constraint points, before the planner gives up."""
+_TIGHTENED = {  # the evaluator's rule: the bound that keeps it
+    "joint speed": "joint_speed",
+    "joint acceleration": "joint_acceleration",
+    "joint jerk": "joint_jerk",
+    "acceleration step": "joint_jerk",
+    "actuator torque": "load_torque",
+    "motor current": "load_torque",
+    "tool speed": "tool_speed",
+    "contour deviation": "contour_tolerance",
+    "coverage": "contour_tolerance",
+}
+COVERAGE_TIGHTENING = 0.95
+"""Factor on the contour bound when the cut leaves a stretch uncut without a deviation
+beyond the tube (the gap's length says nothing about how much tighter to go)."""
+
+
+def _tightened(bounds: PlannerBounds, violations: list[Violation]) -> PlannerBounds:
+    """``bounds`` with each bound whose limit the evaluator found exceeded cut by the
+    excess (worst / limit), and half the evaluator's tolerance more."""
+    factors: dict[str, float] = {}
+    for violation in violations:
+        field = _TIGHTENED.get(violation.rule)
+        if field is None:
+            raise PlanningError(f"the plan breaks a limit no bound keeps: {violation}")
+        factor = COVERAGE_TIGHTENING
+        if violation.rule != "coverage":
+            factor = abs(violation.allowed / violation.worst) * (1 - RELATIVE_TOLERANCE / 2)
+        factors[field] = min(factors.get(field, 1.0), factor)
+    return dataclasses.replace(
+        bounds, **{name: getattr(bounds, name) * f for name, f in factors.items()}
+    )
+
+
+def _added(statistics: dict[str, Any], again: dict[str, Any]) -> dict[str, Any]:
+    """The statistics of a re-solve, with the solve times and iterations of both."""
+    for key in ("solve_time_s", "function_time_s", "iterations"):
+        again[key] += statistics[key]
+    again["statuses"] = statistics["statuses"] + again["statuses"]
+    return again
 
 
 MIN_TIME = register(

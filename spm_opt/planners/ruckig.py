@@ -32,6 +32,11 @@ every switch time) and the caps of a segment whose tool speed exceeds the limit 
 down by the excess, via velocities re-chosen and all segments solved again, until none
 exceeds it (at most ``MAX_ROUNDS``). On the project's problems no cap has needed lowering.
 
+Torque. Ruckig knows no dynamics: the whole plan's actuator torque (the model through the
+actuator, as the evaluator measures it) is checked on a 1 kHz grid, and while it exceeds
+the limit (:func:`spm_opt.limits.torque_limit`) the acceleration and jerk limits are
+lowered by ``TORQUE_STEP`` and every segment solved again (at most ``MAX_ROUNDS``).
+
 Local only. Ruckig's community edition sends problems with intermediate waypoints to a
 remote service. Every call goes through :func:`calculate_locally`, which refuses an input
 with intermediate positions and builds the generator without waypoint capacity: one
@@ -54,6 +59,8 @@ import ruckig
 from scipy.interpolate import PPoly
 
 from spm_opt.errors import PlanningError
+from spm_opt.limits import planner_bounds, torque_limit
+from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
@@ -68,6 +75,9 @@ TOOL_SPEED_SLACK = 1e-4
 """Fraction by which a checked tool speed may exceed the limit before caps are lowered."""
 MAX_ROUNDS = 10
 """Most rounds of lowering speed caps for the tool-speed limit."""
+TORQUE_STEP = 0.8
+"""Factor on the acceleration and jerk limits for each round in which the plan's actuator
+torque exceeds its limit (ruckig knows no dynamics)."""
 MIN_PIECE_S = 1e-9
 """Switch times closer than this, s, are merged (their jerk is averaged, within limits)."""
 
@@ -152,15 +162,15 @@ def stop_speed(distance: np.ndarray, acceleration: float, jerk: float) -> np.nda
 def line_speed_caps(problem: Problem) -> np.ndarray:
     """Per-joint speed caps (segments, 2), rad/s, that keep a motion along each segment's
     joint-space line within the joint-speed and tool-speed limits."""
-    limits, contour = problem.limits, problem.contour
+    bounds, contour = planner_bounds(problem, 0.0), problem.contour
     waypoints = problem.waypoint_angles
     s = np.linspace(0.0, 1.0, LINE_SAMPLES)[:, None]
     caps = []
     for start, step in zip(waypoints[:-1], np.diff(waypoints, axis=0), strict=True):
-        rate = limits.max_joint_speed / np.max(np.abs(step))  # line parameter per s
-        if limits.max_tool_speed is not None:
+        rate = bounds.joint_speed / np.max(np.abs(step))  # line parameter per s
+        if bounds.tool_speed is not None:
             gain = np.max(contour.joint_tool_speed(start + s * step, step))  # m per unit s
-            rate = min(rate, limits.max_tool_speed / gain)
+            rate = min(rate, bounds.tool_speed / gain)
         caps.append(rate * np.abs(step))
     return np.array(caps)
 
@@ -280,7 +290,7 @@ def _solve_within_tool_speed(
 ) -> tuple[_Plan, int]:
     """Every segment solved, the caps of any that exceeds the tool-speed limit lowered by
     its excess until none does; the plan and the number of rounds it took."""
-    limit = problem.limits.max_tool_speed
+    limit = planner_bounds(problem, 0.0).tool_speed
     caps = line_speed_caps(problem)
     for rounds in range(1, MAX_ROUNDS + 1):
         plan = _solve_segments(problem, caps, settings, acceleration, jerk)
@@ -297,6 +307,14 @@ def _solve_within_tool_speed(
     )
 
 
+def _peak_torque(problem: Problem, positions: PPoly) -> float:
+    """Largest actuator torque, N·m, of the motion ``positions`` on a 1 kHz grid."""
+    motion = Trajectory(positions)
+    t = motion.time_grid(CHECK_RATE_HZ)
+    state = motion.position(t), motion.velocity(t), motion.acceleration(t)
+    return float(np.max(np.abs(dynamics.actuator_torque(problem.robot, *state))))
+
+
 class RuckigPlanner:
     """Time-optimal jerk-limited segments between the landmarks, within the tool-speed limit."""
 
@@ -305,11 +323,20 @@ class RuckigPlanner:
     def plan(self, problem: Problem) -> Trajectory:
         settings = RuckigSettings.from_options(planner_options(problem, self.name, OPTION_KEYS))
         start = time.perf_counter()
-        limits = problem.limits
-        acceleration = limits.max_joint_acceleration or settings.default_acceleration_rad_s2
-        jerk = limits.max_joint_jerk or settings.default_jerk_rad_s3
-        plan, rounds = _solve_within_tool_speed(problem, settings, acceleration, jerk)
-        positions, landmark_times = _join(plan.pieces)
+        bounds = planner_bounds(problem, 0.0)
+        acceleration = bounds.joint_acceleration or settings.default_acceleration_rad_s2
+        jerk = bounds.joint_jerk or settings.default_jerk_rad_s3
+        for _ in range(MAX_ROUNDS):
+            plan, rounds = _solve_within_tool_speed(problem, settings, acceleration, jerk)
+            positions, landmark_times = _join(plan.pieces)
+            if _peak_torque(problem, positions) <= torque_limit(problem):
+                break
+            acceleration, jerk = acceleration * TORQUE_STEP, jerk * TORQUE_STEP
+        else:
+            raise PlanningError(
+                f"ruckig: the actuator torque still exceeds {torque_limit(problem):g} N·m "
+                f"after {MAX_ROUNDS} rounds of lowering the acceleration and jerk limits"
+            )
         return Trajectory(
             positions,
             metadata={

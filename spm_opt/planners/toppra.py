@@ -21,7 +21,8 @@ stops) and, by toppra's interpolation scheme, again at the next gridpoint:
   so for ṡ > 0 it does not depend on ṡ: f(q, q' ṡ) = f(q, q') is a constant per gridpoint,
   exact in toppra's form. Only where the sliding direction reverses between gridpoints is it
   bounded: each gridpoint's bound allows every friction value of it and its neighbours (and
-  0, at rest, at the ends). A gear efficiency η < 1 costs at most 1/η, so |τ| ≤ η τ_max.
+  0, at rest, at the ends). The bound on |τ| is :mod:`spm_opt.limits`' load-torque bound
+  (the gear efficiency and the continuous current taken into account there).
 
 toppra works in σ = s / ℓ, ℓ the largest speed allowed (mm per s), so that σ̇ ≤ 1: with
 ṡ² up to 1e4 mm²/s² its LP solver fails on the finest gridpoints.
@@ -62,6 +63,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PPoly
 
 from spm_opt.errors import PlanningError
+from spm_opt.limits import planner_bounds, torque_limit
 from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
@@ -220,11 +222,11 @@ def _friction_range(friction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _speed_bound(problem: Problem, q: np.ndarray, dq: np.ndarray, shares: _Shares) -> np.ndarray:
     """Largest ṡ², mm²/s², at joint angles q (N, 2) with path tangents q' (N, 2), rad/mm:
     each joint within its speed limit and the cut point within the tool-speed limit."""
-    limits = problem.limits
-    pace = np.max(np.abs(dq), axis=1) / (limits.max_joint_speed * shares.joint_speed)  # s/mm
-    if limits.max_tool_speed is not None:
+    bounds = planner_bounds(problem, 0.0)
+    pace = np.max(np.abs(dq), axis=1) / (bounds.joint_speed * shares.joint_speed)  # s/mm
+    if bounds.tool_speed is not None:
         stretch = problem.contour.joint_tool_speed(q, dq) / MM
-        pace = np.maximum(pace, stretch / (limits.max_tool_speed / MM * shares.tool_speed))
+        pace = np.maximum(pace, stretch / (bounds.tool_speed / MM * shares.tool_speed))
     return 1.0 / pace**2
 
 
@@ -237,12 +239,11 @@ def _constraints(
 ) -> _Constraints:
     """The limits at gridpoints s (N,), mm, with ``acceleration`` the joint acceleration
     bound given to toppra, rad/s² (None: unlimited)."""
-    robot = problem.robot
-    actuator = robot.actuator
+    robot, bounds = problem.robot, planner_bounds(problem, 0.0)
     q, dq, ddq = segment.derivatives(s)
-    inertia = dynamics.mass_matrix(robot, q) + actuator.rotor_inertia_kg_m2 * np.eye(2)
+    inertia = dynamics.mass_matrix(robot, q) + bounds.rotor_inertia * np.eye(2)
     friction_low, friction_high = _friction_range(dynamics.friction_torque(robot, q, dq))
-    torque = actuator.gear_efficiency * problem.max_joint_torque * shares.torque
+    torque = bounds.load_torque * shares.torque
     rows = (("actuator 1 torque", "N·m"), ("actuator 2 torque", "N·m"))
     limit = np.full(2, torque)
     a = np.einsum("nij,nj->ni", inertia, dq)
@@ -517,7 +518,7 @@ def _excess(problem: Problem, piece: _Piece) -> dict[str, float]:
     torque = dynamics.actuator_torque(robot, piece.q, piece.qd, piece.qdd)
     peaks = {
         "joint_speed": (np.max(np.abs(piece.qd)) / limits.max_joint_speed, _SPEED_SLACK),
-        "torque": (np.max(np.abs(torque)) / problem.max_joint_torque, 0.0),
+        "torque": (np.max(np.abs(torque)) / torque_limit(problem), 0.0),
     }
     if limits.max_tool_speed is not None:
         speed = problem.contour.joint_tool_speed(piece.q, piece.qd)
