@@ -98,3 +98,26 @@ def test_tool_speed_along_the_contour_at_constant_arc_length_rate():
     flat = meridian_contour(0.6)
     assert flat.radius_slope[0] == 0.0
     assert contour.radius_slope[0] == pytest.approx(0.01 / 0.6)
+
+
+def square_loop() -> Contour:
+    """Four landmarks around the vertex, a closed loop."""
+    tilt = 0.3
+    corners = [(tilt, 0.0), (0.0, tilt), (-tilt, 0.0), (0.0, -tilt)]
+    points = np.array([[np.sin(a), np.sin(b), 1.0] for a, b in corners])
+    return Contour(R * points / np.linalg.norm(points, axis=1, keepdims=True), closed=True)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0.0, 0.99), st.floats(0.05, 1.0), st.integers(0, 1))
+def test_progress_recovers_the_arc_length_across_the_closing_landmark(start, span, backwards):
+    """Cut points walked along a closed loop from any start, forwards or backwards, for any
+    part of a turn: the progress is the arc length walked, continued past the first
+    landmark (not wrapped back to 0), up to where it started."""
+    contour = square_loop()
+    walked = np.linspace(0.0, span * contour.length, 400) * (-1.0 if backwards else 1.0)
+    s = start * contour.length + walked
+    progress = contour.progress(contour.nearest(contour.point_at(np.mod(s, contour.length))))
+    shift = progress[0] - s[0]
+    assert shift / contour.length == pytest.approx(np.round(shift / contour.length), abs=1e-9)
+    np.testing.assert_allclose(progress - shift, s, atol=1e-9)
