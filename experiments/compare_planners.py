@@ -10,18 +10,17 @@ every planner on every problem, one row each.
 from __future__ import annotations
 
 import argparse
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pandas as pd
 
 import spm_opt as so
-from spm_opt.comparison import (
-    comparison_table,
-    print_progress,
-    run_planners,
-    write_comparison,
-)
+from spm_opt.comparison import comparison_table, progress_line, run_planners, write_comparison
 from spm_opt.files import write_atomically
+from spm_opt.report.columns import column
+from spm_opt.report.markdown import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
 SHOWN = [
@@ -39,15 +38,19 @@ SHOWN = [
 ]
 
 
-def markdown_table(frame: pd.DataFrame) -> str:
-    """A DataFrame as a markdown table, numbers to four significant digits."""
+def combined_markdown(frame: pd.DataFrame) -> str:
+    """The combined table's :data:`SHOWN` columns in markdown, under their headings."""
+    headings = [name if name == "problem" else column(name).heading for name in SHOWN]
+    rows = [
+        [value if name == "problem" else column(name).show(value) for name, value in row.items()]
+        for row in frame[SHOWN].to_dict("records")
+    ]
+    return "\n".join(markdown_table(headings, rows)) + "\n"
 
-    def cell(value: object) -> str:
-        return f"{value:.4g}" if isinstance(value, float) else str(value)
 
-    lines = ["| " + " | ".join(frame.columns) + " |", "|" + "---|" * len(frame.columns)]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in frame.itertuples(False)]
-    return "\n".join(lines) + "\n"
+def progress(prefix: str) -> Callable[..., None]:
+    """A progress callback that prints each planner's start and result to stderr."""
+    return lambda *call: print(prefix + progress_line(*call), file=sys.stderr, flush=True)
 
 
 def main() -> None:
@@ -59,7 +62,7 @@ def main() -> None:
     tables = []
     for path in sorted((ROOT / "problems").glob("*.toml")):
         problem = so.load_problem(path)
-        outcomes = run_planners(problem, names, print_progress(f"{problem.name} "))
+        outcomes = run_planners(problem, names, progress(f"{problem.name} "))
         write_comparison(problem, outcomes, args.out / problem.name)
         tables.append(comparison_table(outcomes).assign(problem=problem.name))
     combined = pd.concat(tables, ignore_index=True)
@@ -68,7 +71,7 @@ def main() -> None:
         {
             args.out / "all_problems.csv": combined.to_csv(index=False),
             args.out / "all_problems.md": "# Every planner on every problem\n\n"
-            + markdown_table(combined[SHOWN]),
+            + combined_markdown(combined),
         }
     )
     print(args.out / "all_problems.md")

@@ -16,6 +16,7 @@ from spm_opt.comparison import compare
 from spm_opt.contour import Contour
 from spm_opt.errors import (
     InputError,
+    MissingDependency,
     PlanningError,
     SpmOptError,
     UnknownPlannerError,
@@ -40,6 +41,7 @@ __all__ = [
     "InputError",
     "Limits",
     "ExecutionSettings",
+    "MissingDependency",
     "PlanningError",
     "Problem",
     "Report",

@@ -1,12 +1,16 @@
 """The ``spm-opt`` command line, thin over the library.
 
-A user's mistake prints one line, ``spm-opt: error: ...``, and exits with status 2.
+A user's mistake prints one line, ``spm-opt: error: ...``, and exits with status 2; so
+does a missing optional package, naming the extra that installs it. The library's
+warnings reach stderr as ``spm-opt: warning: ...``; ``-v`` adds its info lines, ``-vv``
+its debug lines.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,9 +18,10 @@ from typing import NoReturn
 
 import numpy as np
 
-from spm_opt.errors import InputError, SpmOptError
+from spm_opt.errors import InputError, SpmOptError, require
 
 PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
+_VERBOSE = "show the library's info lines on stderr (-vv: debug lines too)"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -28,6 +33,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="spm-opt", description=__doc__.splitlines()[0])
+    parser.add_argument("-v", "--verbose", action="count", default=0, help=_VERBOSE)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     reproduce = commands.add_parser("reproduce", help="reproduce the paper's Table III and Fig. 8")
@@ -78,11 +84,22 @@ def _parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="Dask scheduler tcp://host:port, or 'local' for a Dask cluster on this machine",
     )
+    sweep.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="run every failed task again (default: only those that failed for the machine's "
+        "reasons: a worker killed, a lost connection, a timeout)",
+    )
 
     evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
     evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
     evaluate.add_argument("--json", action="store_true", help="print the report as JSON")
+    for command in commands.choices.values():
+        # -v after the command as well; SUPPRESS keeps a -v given before it
+        command.add_argument(
+            "-v", "--verbose", action="count", default=argparse.SUPPRESS, help=_VERBOSE
+        )
     return parser
 
 
@@ -194,13 +211,22 @@ def _sweep(args: argparse.Namespace) -> None:
     from spm_opt.sweep.spec import load_sweep_spec
 
     spec = load_sweep_spec(args.spec)
-    summary = run_sweep(spec.tasks(), args.out, workers=args.workers, scheduler=args.scheduler)
+    tasks = spec.tasks()
+    summary = run_sweep(
+        tasks,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        retry_failed=args.retry_failed,
+    )
     print(
         f"{spec.name}: {summary.total} tasks, {summary.skipped} already done, "
-        f"{summary.done} run ({summary.failed} failed) in {summary.seconds:.1f} s",
+        f"{summary.done + summary.failed} run ({summary.retried} again, {summary.failed} "
+        f"failed) in {summary.seconds:.1f} s",
         file=sys.stderr,
     )
-    for path in write_sweep_report(args.out, title=spec.description or spec.name):
+    keys = [task.key for task in tasks]
+    for path in write_sweep_report(args.out, title=spec.description or spec.name, keys=keys):
         print(path)
 
 
@@ -242,7 +268,7 @@ def _evaluate(args: argparse.Namespace) -> None:
 
 
 def _compare(args: argparse.Namespace) -> None:
-    from spm_opt.comparison import print_progress, run_planners, write_comparison
+    from spm_opt.comparison import progress_line, run_planners, write_comparison
     from spm_opt.problem import load_problem
 
     names = None
@@ -251,7 +277,9 @@ def _compare(args: argparse.Namespace) -> None:
         if not names:
             raise InputError(f"--planners {args.planners!r}: expected comma-separated names")
     problem = load_problem(args.problem)
-    outcomes = run_planners(problem, names, print_progress())
+    outcomes = run_planners(
+        problem, names, lambda *call: print(progress_line(*call), file=sys.stderr, flush=True)
+    )
     for path in write_comparison(problem, outcomes, args.out):
         print(path)
 
@@ -267,10 +295,58 @@ _COMMANDS = {
 }
 
 
+def _optional_modules(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """The optional modules the command needs, each with what needs it; imported before the
+    command starts, so a missing one leaves nothing half-written."""
+    if args.command == "sweep":
+        needed = [("tqdm", "the sweep"), ("pyarrow", "the sweep's results.parquet")]
+        if args.scheduler is not None:
+            needed.append(("distributed", f"--scheduler {args.scheduler}"))
+        return needed
+    if args.command == "reproduce":
+        return [("mujoco", "reproduce (Table IV's MuJoCo check)")]
+    if args.command == "execute" and args.backend == "dynamixel":
+        # pyserial first: dynamixel-sdk imports it, and would be blamed for its absence
+        return [("serial", "--backend dynamixel"), ("dynamixel_sdk", "--backend dynamixel")]
+    return []
+
+
+class _OneLine(logging.Formatter):
+    """A log record as ``spm-opt: warning: message`` (the level in lower case)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return f"spm-opt: {record.levelname.lower()}: {record.getMessage()}"
+
+
+def _log_to_stderr(verbosity: int) -> logging.Handler:
+    """Send the library's log to stderr, warnings and worse (-v: info, -vv: debug too);
+    returns the handler, for :func:`main` to remove."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_OneLine())
+    logger = logging.getLogger("spm_opt")
+    logger.setLevel({0: logging.WARNING, 1: logging.INFO}.get(verbosity, logging.DEBUG))
+    logger.addHandler(handler)
+    return handler
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     args = _parser().parse_args(argv)
+    logger = logging.getLogger("spm_opt")
+    level = logger.level
+    handler = _log_to_stderr(args.verbose)
     try:
+        return _run(args)
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the parsed command; returns the exit status."""
+    try:
+        for module, needed_by in _optional_modules(args):
+            require(module, needed_by)
         _COMMANDS[args.command](args)
     except SpmOptError as error:
         print(f"spm-opt: error: {error}", file=sys.stderr)

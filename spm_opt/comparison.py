@@ -8,63 +8,40 @@ A planner that fails gets a row with its error; the others still run.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from spm_opt import limits
 from spm_opt.evaluate import Report, evaluate
 from spm_opt.files import write_atomically
 from spm_opt.model.params import MM
 from spm_opt.planners import PLANNERS, get_planner, plan
 from spm_opt.problem import Problem
+from spm_opt.report.columns import COLUMN, COLUMNS
+from spm_opt.report.markdown import markdown_table
 from spm_opt.trajectory import Trajectory
 
 if TYPE_CHECKING:
     import pandas as pd
 
-COLUMNS = (
-    "planner",
-    "status",
-    "solve_time_s",
-    "wall_time_s",
-    "duration_s",
-    "duration_over_lower_bound",
-    "peak_torque_1_nm",
-    "peak_torque_2_nm",
-    "rms_torque_1_nm",
-    "rms_torque_2_nm",
-    "energy_j",
-    "effort_n2m2s",
-    "peak_joint_speed_over_limit",
-    "max_contour_deviation_mm",
-    "rms_contour_deviation_mm",
-    "max_tool_speed_mm_s",
-    "mean_tool_speed_mm_s",
-    "tool_speed_cv",
-    "rms_jerk_1_rad_s3",
-    "rms_jerk_2_rad_s3",
-    "max_landmark_error_mm",
-    "violations",
-    "error",
-)
-"""The comparison table's columns, in order."""
-
 
 @dataclass(frozen=True)
 class Outcome:
-    """One planner's result: its plan and the evaluator's report, or the error it raised;
-    ``wall_time_s`` is the whole planning call (with any construction and evaluation)."""
+    """One planner's result: its plan and the evaluator's report, or the error it raised
+    (``error`` in words, ``exception`` itself); ``wall_time_s`` is the whole planning call
+    (with any construction, without the evaluation)."""
 
     planner: str
     wall_time_s: float
     trajectory: Trajectory | None = None
     report: Report | None = None
     error: str | None = None
+    exception: Exception | None = field(default=None, compare=False, repr=False)
 
     def row(self) -> dict[str, object]:
         """The outcome as a row of the comparison table (NaN where the planner failed)."""
@@ -105,22 +82,16 @@ Progress = Callable[[int, int, str, "Outcome | None"], None]
 outcome)."""
 
 
-def print_progress(prefix: str = "") -> Progress:
-    """A progress callback that prints each planner's start and result to stderr, each
-    line after ``prefix``."""
-
-    def progress(index: int, count: int, name: str, outcome: Outcome | None) -> None:
-        if outcome is None:
-            line = f"[{index}/{count}] {name} ..."
-        else:
-            result = outcome.error or (
-                f"{outcome.trajectory.duration:.2f} s plan, "  # type: ignore[union-attr]
-                f"{len(outcome.report.violations)} violation(s)"  # type: ignore[union-attr]
-            )
-            line = f"[{index}/{count}] {name}: {result} ({outcome.wall_time_s:.1f} s)"
-        print(prefix + line, file=sys.stderr, flush=True)
-
-    return progress
+def progress_line(index: int, count: int, name: str, outcome: Outcome | None) -> str:
+    """A :data:`Progress` call as one line for the user: "[2/6] toppra ..." before the
+    planner, "[2/6] toppra: 38.06 s plan, 0 violation(s) (0.3 s)" after it."""
+    if outcome is None:
+        return f"[{index}/{count}] {name} ..."
+    result = outcome.error or (
+        f"{outcome.trajectory.duration:.2f} s plan, "  # type: ignore[union-attr]
+        f"{len(outcome.report.violations)} violation(s)"  # type: ignore[union-attr]
+    )
+    return f"[{index}/{count}] {name}: {result} ({outcome.wall_time_s:.1f} s)"
 
 
 def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = None) -> Outcome:
@@ -134,7 +105,10 @@ def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = Non
         )
     except Exception as error:  # noqa: BLE001 - one planner's failure is a row
         return Outcome(
-            name, time.perf_counter() - started, error=f"{type(error).__name__}: {error}"
+            name,
+            time.perf_counter() - started,
+            error=f"{type(error).__name__}: {error}",
+            exception=error,
         )
 
 
@@ -170,44 +144,45 @@ def compare(problem: Problem, planners: Sequence[str] | None = None) -> pd.DataF
 
 
 def _limits_lines(problem: Problem) -> list[str]:
-    limits = problem.limits
+    bounds = problem.limits
 
     def shown(value: float | None, scale: float, unit: str) -> str:
         return "not limited" if value is None else f"{value / scale:.4g} {unit}"
 
     return [
-        f"- joint speed: {limits.max_joint_speed:.4g} rad/s "
-        f"({limits.max_joint_speed * 60 / (2 * np.pi):.4g} rpm)",
-        f"- joint acceleration: {shown(limits.max_joint_acceleration, 1.0, 'rad/s²')}",
-        f"- joint jerk: {shown(limits.max_joint_jerk, 1.0, 'rad/s³')}",
+        f"- joint speed: {bounds.max_joint_speed:.4g} rad/s "
+        f"({bounds.max_joint_speed * 60 / (2 * np.pi):.4g} rpm)",
+        f"- joint acceleration: {shown(bounds.max_joint_acceleration, 1.0, 'rad/s²')}",
+        f"- joint jerk: {shown(bounds.max_joint_jerk, 1.0, 'rad/s³')}",
         f"- actuator torque: {problem.max_joint_torque:.4g} N·m",
-        f"- tool speed on the skull: {shown(limits.max_tool_speed, MM, 'mm/s')}",
-        f"- contour tolerance: {shown(limits.contour_tolerance, MM, 'mm')}",
+        f"- tool speed on the skull: {shown(bounds.max_tool_speed, MM, 'mm/s')}",
+        f"- contour tolerance: {shown(bounds.contour_tolerance, MM, 'mm')}",
     ]
 
 
-_SHOWN = {  # column: (heading, format)
-    "planner": ("planner", "{}"),
-    "status": ("status", "{}"),
-    "solve_time_s": ("solve s", "{:.3g}"),
-    "wall_time_s": ("wall s", "{:.3g}"),
-    "duration_s": ("duration s", "{:.2f}"),
-    "duration_over_lower_bound": ("over bound", "{:.4f}"),
-    "max_contour_deviation_mm": ("max dev. mm", "{:.3g}"),
-    "rms_contour_deviation_mm": ("RMS dev. mm", "{:.3g}"),
-    "max_tool_speed_mm_s": ("max tool mm/s", "{:.3f}"),
-    "mean_tool_speed_mm_s": ("mean tool mm/s", "{:.3f}"),
-    "tool_speed_cv": ("tool CV", "{:.3f}"),
-    "peak_joint_speed_over_limit": ("joint speed / limit", "{:.3f}"),
-    "peak_torque_1_nm": ("peak τ1 N·m", "{:.3f}"),
-    "peak_torque_2_nm": ("peak τ2 N·m", "{:.3f}"),
-    "rms_torque_1_nm": ("RMS τ1 N·m", "{:.4f}"),
-    "rms_torque_2_nm": ("RMS τ2 N·m", "{:.4f}"),
-    "energy_j": ("energy J", "{:.4f}"),
-    "effort_n2m2s": ("∫τᵀτ N²m²s", "{:.4f}"),
-    "rms_jerk_1_rad_s3": ("RMS jerk 1 rad/s³", "{:.3g}"),
-    "rms_jerk_2_rad_s3": ("RMS jerk 2 rad/s³", "{:.3g}"),
-}
+SHOWN = (
+    "planner",
+    "status",
+    "solve_time_s",
+    "wall_time_s",
+    "duration_s",
+    "duration_over_lower_bound",
+    "max_contour_deviation_mm",
+    "rms_contour_deviation_mm",
+    "max_tool_speed_mm_s",
+    "mean_tool_speed_mm_s",
+    "tool_speed_cv",
+    "peak_joint_speed_over_limit",
+    "peak_torque_1_nm",
+    "peak_torque_2_nm",
+    "rms_torque_1_nm",
+    "rms_torque_2_nm",
+    "energy_j",
+    "effort_n2m2s",
+    "rms_jerk_1_rad_s3",
+    "rms_jerk_2_rad_s3",
+)
+"""The columns comparison.md shows, in its order (comparison.csv has every column)."""
 
 
 def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
@@ -227,21 +202,18 @@ def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
         f"- segment durations in the problem (fixed-time planners): "
         f"{', '.join(f'{d:g}' for d in problem.segment_durations)} s",
         "",
-        "Limits every plan is judged by (a violation: more than 0.5 % over a limit, or "
-        "0.01 mm outside the contour tolerance):",
+        "Limits every plan is judged by:",
         "",
         *_limits_lines(problem),
         "",
+        limits.tolerance_note(),
+        "",
     ]
-    headings = [heading for heading, _ in _SHOWN.values()]
-    lines += ["| " + " | ".join(headings) + " |", "|" + "---|" * len(headings)]
-    for outcome in outcomes:
-        row = outcome.row()
-        cells = [
-            "—" if isinstance(row[key], float) and np.isnan(row[key]) else fmt.format(row[key])
-            for key, (_, fmt) in _SHOWN.items()
-        ]
-        lines.append("| " + " | ".join(cells) + " |")
+    rows = [outcome.row() for outcome in outcomes]
+    lines += markdown_table(
+        [COLUMN[name].heading for name in SHOWN],
+        [[COLUMN[name].show(row[name]) for name in SHOWN] for row in rows],
+    )
     lines += ["", "## Violations and failures", ""]
     for outcome in outcomes:
         if outcome.error:
@@ -259,8 +231,8 @@ def write_comparison(
 ) -> list[Path]:
     """Write comparison.csv, comparison.md and the figures into ``out_dir``, all or none;
     return the paths."""
-    from spm_opt import comparison_figures as figures
     from spm_opt.plots import to_png
+    from spm_opt.report import comparison_figures as figures
 
     out = Path(out_dir)
     contents: dict[Path, str | bytes] = {

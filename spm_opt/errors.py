@@ -7,13 +7,28 @@
     │   └── PreflightError           the executor refuses a plan, or a robot not at its start
     ├── PlanningError                a planner could not produce a plan for a valid problem
     ├── CommunicationError           a transaction with a device failed (timeout, corrupt reply)
-    └── DeviceError                  a device reports a fault (a hardware error at connection)
+    ├── DeviceError                  a device reports a fault (a hardware error at connection)
+    └── MissingDependency (ImportError)  an optional package is not installed
 
 Messages are one line naming the field, the value and what is allowed; the command line
-prints them as they are and exits with status 2.
+prints them as they are and exits with status 2. :func:`require` is the one place that
+imports an optional package and turns its absence into :class:`MissingDependency`.
 """
 
 from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+OPTIONAL: dict[str, tuple[str, str]] = {
+    "tqdm": ("tqdm", "sweep"),
+    "pyarrow": ("pyarrow", "sweep"),
+    "distributed": ("distributed", "sweep"),
+    "dynamixel_sdk": ("dynamixel-sdk", "hardware"),
+    "serial": ("pyserial", "hardware"),
+    "mujoco": ("mujoco", "verify"),
+}
+"""Every optional module: its package and the extra of pyproject.toml that installs it."""
 
 
 class SpmOptError(Exception):
@@ -46,3 +61,28 @@ class CommunicationError(SpmOptError):
 
 class DeviceError(SpmOptError):
     """A device reports a fault of its own (e.g. an actuator's hardware error status)."""
+
+
+class MissingDependency(SpmOptError, ImportError):
+    """An optional package is not installed; the message names the extra to install.
+
+    Parameters
+    ----------
+    module : str
+        The module that could not be imported, one of :data:`OPTIONAL`.
+    needed_by : str
+        What needs it, to start the message ("the sweep", "--backend dynamixel").
+    """
+
+    def __init__(self, module: str, needed_by: str) -> None:
+        package, extra = OPTIONAL[module]
+        super().__init__(f'{needed_by} needs {package}: pip install -e ".[{extra}]"', name=module)
+
+
+def require(module: str, needed_by: str) -> ModuleType:
+    """Import the optional ``module`` (one of :data:`OPTIONAL`), or raise
+    :class:`MissingDependency` naming its extra when it cannot be imported."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as error:
+        raise MissingDependency(module, needed_by) from error

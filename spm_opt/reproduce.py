@@ -26,6 +26,7 @@ from spm_opt.model.params import DEG, MM
 from spm_opt.planners import plan
 from spm_opt.planners.cubic import absolute_time_coefficients
 from spm_opt.problem import Problem, load_problem
+from spm_opt.report.markdown import markdown_table
 from spm_opt.trajectory import Trajectory
 
 AGREES = "agrees"
@@ -144,6 +145,7 @@ def _explain(
 
 
 def table3_csv(rows: list[Table3Row]) -> str:
+    """Table III's rows as CSV, one column per field of :class:`Table3Row`."""
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=list(asdict(rows[0])), lineterminator="\n")
     writer.writeheader()
@@ -153,6 +155,7 @@ def table3_csv(rows: list[Table3Row]) -> str:
 
 
 def table3_markdown(rows: list[Table3Row]) -> str:
+    """table3.md: how the values were computed, the counts of agreement, and the table."""
     counts = {s: sum(r.status == s for r in rows) for s in (AGREES, TRUNCATED, DISAGREES)}
     lines = [
         "# Table III reproduced",
@@ -166,14 +169,15 @@ def table3_markdown(rows: list[Table3Row]) -> str:
         f"{counts[TRUNCATED]} when ours is truncated (the paper truncates some values), and "
         f"{counts[DISAGREES]} {'disagrees' if counts[DISAGREES] == 1 else 'disagree'}.",
         "",
-        "| value | printed | ours | difference | status | note |",
-        "|---|---|---|---|---|---|",
+        *markdown_table(
+            ["value", "printed", "ours", "difference", "status", "note"],
+            [
+                [r.quantity, r.printed, f"{r.ours:.6g}", f"{r.difference_digits:+.2f}"]
+                + [r.status, r.note]
+                for r in rows
+            ],
+        ),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r.quantity} | {r.printed} | {r.ours:.6g} | {r.difference_digits:+.2f} "
-            f"| {r.status} | {r.note} |"
-        )
     return "\n".join(lines) + "\n"
 
 
@@ -269,6 +273,7 @@ def torque_results(
 
 
 def table4_csv(rows: list[Table4Row]) -> str:
+    """Table IV's rows as CSV, one column per field of :class:`Table4Row`."""
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=list(asdict(rows[0])), lineterminator="\n")
     writer.writeheader()
@@ -277,7 +282,8 @@ def table4_csv(rows: list[Table4Row]) -> str:
 
 
 def table4_markdown(results: TorqueResults, mu: float) -> str:
-    rows = results.rows
+    """table4.md: the table and the further checks; ``mu`` is the robot's friction
+    coefficient, left out as in the paper."""
     lines = [
         "# Table IV reproduced",
         "",
@@ -289,17 +295,33 @@ def table4_markdown(results: TorqueResults, mu: float) -> str:
         f"column matches by construction; the differences do not. Friction (μ = {mu:g}) is",
         "left out as in the paper; fig14_friction.png shows what it adds.",
         "",
-        "| actuator | RMS torque (N·m) | printed | Δ minimal coord. (N·m) | Δ MuJoCo (N·m) "
-        "| Δ minimal (%) | Δ MuJoCo (%) | printed Δ SimMechanics (%) |",
-        "|---|---|---|---|---|---|---|---|",
+        *markdown_table(
+            [
+                "actuator",
+                "RMS torque (N·m)",
+                "printed",
+                "Δ minimal coord. (N·m)",
+                "Δ MuJoCo (N·m)",
+                "Δ minimal (%)",
+                "Δ MuJoCo (%)",
+                "printed Δ SimMechanics (%)",
+            ],
+            [
+                [r.actuator, f"{r.rms_torque_nm:.4f}", r.printed_rms_torque_nm]
+                + [
+                    f"{value:.2e}"
+                    for value in (
+                        r.minimal_coordinates_difference_nm,
+                        r.multibody_difference_nm,
+                        r.minimal_coordinates_deviation_percent,
+                        r.multibody_deviation_percent,
+                    )
+                ]
+                + [r.printed_simmechanics_deviation_percent]
+                for r in results.rows
+            ],
+        ),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r.actuator} | {r.rms_torque_nm:.4f} | {r.printed_rms_torque_nm} "
-            f"| {r.minimal_coordinates_difference_nm:.2e} | {r.multibody_difference_nm:.2e} "
-            f"| {r.minimal_coordinates_deviation_percent:.2e} "
-            f"| {r.multibody_deviation_percent:.2e} | {r.printed_simmechanics_deviation_percent} |"
-        )
     start, length = OPEN_LOOP_S
     lines += [
         "",

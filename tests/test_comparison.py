@@ -44,7 +44,7 @@ def test_one_row_per_planner_with_the_evaluators_figures(paper_problem):
             max(report.peak_joint_speed_rad_s) / report.joint_speed_limit_rad_s
         )
     cubic = table.set_index("planner").loc["cubic"]
-    assert cubic["status"] == "4 violation(s)" and "contour deviation" in cubic["violations"]
+    assert cubic["status"] == "5 violation(s)" and "contour deviation" in cubic["violations"]
     assert table.set_index("planner").loc["toppra", "status"] == "ok"
 
 

@@ -33,6 +33,7 @@ from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.plots import to_png
 from spm_opt.problem import Problem
+from spm_opt.report.markdown import markdown_table
 from spm_opt.trajectory import Trajectory
 from spm_opt.verify.motion_capture import (
     Capture,
@@ -344,8 +345,6 @@ def _markdown(problem: Problem, summary: dict[str, Any]) -> str:
         f"{loop.get('achieved_rate_hz', float('nan')):.1f} Hz, period error p99 "
         f"{loop.get('period_error_p99_ms', float('nan')):.3f} ms.",
         "",
-        "| figure | θ1 | θ2 |",
-        "|---|---|---|",
     ]
     rows = [
         ("model torque RMS, N·m", torques["model_rms_nm"]),
@@ -355,7 +354,9 @@ def _markdown(problem: Problem, summary: dict[str, Any]) -> str:
         ("max tracking error, deg", tracking["max_error_deg"]),
         ("RMS tracking error, deg", tracking["rms_error_deg"]),
     ]
-    lines += [f"| {name} | {a:.4f} | {b:.4f} |" for name, (a, b) in rows]
+    lines += markdown_table(
+        ["figure", "θ1", "θ2"], [[name, f"{a:.4f}", f"{b:.4f}"] for name, (a, b) in rows]
+    )
     lines += [
         "",
         "Motion capture (synthetic: unknown rigid transform, noise "

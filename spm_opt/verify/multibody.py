@@ -40,11 +40,13 @@ from collections.abc import Callable
 from functools import lru_cache
 
 import casadi as ca
-import mujoco
 import numpy as np
 
+from spm_opt.errors import require
 from spm_opt.model.params import Body, Robot
 from spm_opt.trajectory import Trajectory
+
+mujoco = require("mujoco", "the MuJoCo check (spm_opt.verify.multibody)")
 
 ACTIVE_JOINTS = ("theta1", "theta2")
 PASSIVE_JOINTS = ("phi1", "phi2")

@@ -1,20 +1,54 @@
-"""The comparison's figures: every planner's plan on the same axes, one colour each."""
+"""The comparison's figures: every planner's plan on the same axes, one colour each.
+
+They take the plans as :class:`Planned` objects (the comparison's ``Outcome`` is one),
+each with a trajectory and the evaluator's report, and never import the comparison.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
+from spm_opt.report.columns import column
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from spm_opt.comparison import Outcome
+    from spm_opt.trajectory import Trajectory
+
+
+class Measured(Protocol):
+    """What the headline figure reads of a plan's evaluation (the evaluator's ``Report``)."""
+
+    @property
+    def duration_over_lower_bound(self) -> float: ...
+    @property
+    def max_contour_deviation_mm(self) -> float: ...
+    @property
+    def max_tool_speed_mm_s(self) -> float: ...
+    @property
+    def rms_jerk_rad_s3(self) -> Sequence[float]: ...
+    @property
+    def effort_n2m2s(self) -> float: ...
+    @property
+    def violations(self) -> Sequence[object]: ...
+
+
+class Planned(Protocol):
+    """One planner's plan and its evaluation; the figures take only plans that have both."""
+
+    @property
+    def planner(self) -> str: ...
+    @property
+    def trajectory(self) -> Trajectory | None: ...
+    @property
+    def report(self) -> Measured | None: ...
+
 
 RATE_HZ = 200.0
 """Sampling rate of the drawn curves, Hz."""
@@ -31,7 +65,7 @@ def _colour(index: int) -> str:
     return _COLOURS[index % len(_COLOURS)]
 
 
-def _samples(outcome: Outcome) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _samples(outcome: Planned) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """t (N,), s, and q, q̇, q̈ (N, 2) of a plan on the drawing grid."""
     trajectory = outcome.trajectory
     assert trajectory is not None
@@ -39,7 +73,7 @@ def _samples(outcome: Outcome) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     return t, trajectory.position(t), trajectory.velocity(t), trajectory.acceleration(t)
 
 
-def _cut_progress(problem: Problem, outcome: Outcome) -> tuple[np.ndarray, np.ndarray]:
+def _cut_progress(problem: Problem, outcome: Planned) -> tuple[np.ndarray, np.ndarray]:
     """Distance cut so far (N,), mm, and the tool speed (N,), mm/s, on the drawing grid."""
     t, q, qd, _ = _samples(outcome)
     speed = problem.contour.joint_tool_speed(q, qd) / MM
@@ -47,7 +81,7 @@ def _cut_progress(problem: Problem, outcome: Outcome) -> tuple[np.ndarray, np.nd
     return distance, speed
 
 
-def joints(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+def joints(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Joint angles (deg) over time (s), one colour per planner."""
     figure = _figure((10, 6))
     axes = figure.subplots(2, 1, sharex=True)
@@ -64,7 +98,7 @@ def joints(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
     return figure
 
 
-def torques(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+def torques(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Actuator torques (N·m, the model with exact friction) over time (s)."""
     figure = _figure((10, 6))
     axes = figure.subplots(2, 1, sharex=True)
@@ -84,7 +118,7 @@ def torques(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
     return figure
 
 
-def tool_speed(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+def tool_speed(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """The tool's speed on the skull (mm/s) against the distance cut so far (mm), with the
     limit and the landmarks' places along the contour."""
     figure = _figure((10, 4.5))
@@ -109,7 +143,7 @@ def tool_speed(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
     return figure
 
 
-def cuts(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+def cuts(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Left: every cut on the skull seen from above (mm) with the planned contour and the
     landmarks. Right: each cut's distance from the contour (mm, log scale) along it, with
     the tolerance."""
@@ -147,34 +181,37 @@ def cuts(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
     return figure
 
 
-_HEADLINES = (  # (title, value of a report, log scale)
-    ("duration over the lower bound", lambda r: r.duration_over_lower_bound, False),
-    ("max distance from the contour (mm)", lambda r: r.max_contour_deviation_mm, True),
-    ("max tool speed (mm/s)", lambda r: r.max_tool_speed_mm_s, False),
-    ("RMS jerk, larger joint (rad/s³)", lambda r: max(r.rms_jerk_rad_s3), True),
-    ("∫τᵀτ dt (N²·m²·s)", lambda r: r.effort_n2m2s, False),
-    ("violations", lambda r: len(r.violations), False),
+_HEADLINES: tuple[tuple[str, Callable[[Measured], float], bool], ...] = (
+    # (column, its value in a report, log scale)
+    ("duration_over_lower_bound", lambda r: r.duration_over_lower_bound, False),
+    ("max_contour_deviation_mm", lambda r: r.max_contour_deviation_mm, True),
+    ("max_tool_speed_mm_s", lambda r: r.max_tool_speed_mm_s, False),
+    ("rms_jerk_rad_s3", lambda r: max(r.rms_jerk_rad_s3), True),
+    ("effort_n2m2s", lambda r: r.effort_n2m2s, False),
+    ("violation_count", lambda r: len(r.violations), False),
 )
 
 
-def headline(problem: Problem, outcomes: Sequence[Outcome]) -> Figure:
+def headline(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Bars of the headline figures, one panel per figure, one bar per planner."""
     figure = _figure((13, 7))
     axes = figure.subplots(2, 3).ravel()
     names = [o.planner for o in outcomes]
     colours = [_colour(k) for k in range(len(outcomes))]
     limits = problem.limits
-    for axis, (title, value, log) in zip(axes, _HEADLINES, strict=True):
-        values = [value(o.report) for o in outcomes]
+    drawn_limits = {
+        "max_tool_speed_mm_s": limits.max_tool_speed,
+        "max_contour_deviation_mm": limits.contour_tolerance,
+    }
+    for axis, (name, value, log) in zip(axes, _HEADLINES, strict=True):
+        values = [value(o.report) for o in outcomes]  # type: ignore[arg-type]
         axis.bar(names, values, color=colours, log=log)
-        axis.set_title(title, fontsize=10)
+        axis.set_title(column(name).label, fontsize=10)
         axis.tick_params(axis="x", labelrotation=45, labelsize=8)
         axis.grid(True, axis="y", alpha=0.3)
-        if title.startswith("max tool") and limits.max_tool_speed is not None:
-            axis.axhline(limits.max_tool_speed / MM, color="black", linestyle="--")
-        if title.startswith("max distance") and limits.contour_tolerance is not None:
-            axis.axhline(limits.contour_tolerance / MM, color="black", linestyle="--")
-        if title.startswith("duration"):
+        if drawn_limits.get(name) is not None:
+            axis.axhline(drawn_limits[name] / MM, color="black", linestyle="--")
+        if name == "duration_over_lower_bound":
             axis.set_ylim(min(0.95, min(values) - 0.01), max(values) + 0.02)
     figure.suptitle(f"{problem.name}: headline figures (dashed: the limit)")
     return figure
