@@ -13,8 +13,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from spm_opt.errors import InputError, PlanningError
 from spm_opt.sweep.runner import run_sweep
-from spm_opt.sweep.task import Task
+from spm_opt.sweep.task import ProblemFiles, Task
+
+NOWHERE = ProblemFiles("/nowhere.toml", "", "robot.toml", "")
+"""The stand-in tasks' problem: none (their functions read no file)."""
 
 
 def grid_tasks(count: int, sweep: str = "stand-in", **extra: Any) -> list[Task]:
@@ -23,8 +27,9 @@ def grid_tasks(count: int, sweep: str = "stand-in", **extra: Any) -> list[Task]:
         Task(
             key=f"{sweep[:4]}{x:012x}"[-16:],
             sweep=sweep,
-            problem_path="/nowhere.toml",
+            problem=NOWHERE,
             planner="square",
+            code="stand-in",
             parameters={"x": x, **extra},
             overrides={"x": x},
         )
@@ -57,6 +62,19 @@ def fails_on_three(task: Task) -> dict[str, Any]:
     """``square``, but raises for x = 3 (a bug in a task function)."""
     if task.parameters["x"] == 3:
         raise ZeroDivisionError("x = 3 is not allowed")
+    return square(task)
+
+
+def fails_by_kind(task: Task) -> dict[str, Any]:
+    """``square``, but x = 1 times out (the machine's failure), x = 2 cannot be planned and
+    x = 3 is refused as input (the problem's failures, results)."""
+    x = task.parameters["x"]
+    if x == 1:
+        raise TimeoutError("no answer from the license server in 30 s")
+    if x == 2:
+        raise PlanningError("square: infeasible")
+    if x == 3:
+        raise InputError("x = 3: not allowed")
     return square(task)
 
 

@@ -1,5 +1,6 @@
 """A sweep's results: reading results.jsonl and writing the report, on synthetic rows."""
 
+import ast
 import json
 import math
 from pathlib import Path
@@ -8,10 +9,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from spm_opt.comparison import COLUMNS
 from spm_opt.errors import InputError
-from spm_opt.sweep.results import load_sweep, sweep_markdown, with_metrics, write_sweep_report
-from spm_opt.sweep.results_figures import sweep_figures
+from spm_opt.report.columns import COLUMNS
+from spm_opt.sweep import results_figures
+from spm_opt.sweep.results import (
+    load_sweep,
+    sweep_figures,
+    sweep_markdown,
+    with_metrics,
+    write_sweep_report,
+)
 
 MU = [0.0025, 0.04, 0.24]
 MASS = [0.0, 0.25, 0.5]
@@ -298,3 +305,51 @@ def test_many_values_are_binned(tmp_path: Path) -> None:
     assert table[0][7] == f"{40 - 0.35:.4g}"  # median duration of the first 8
     names = [name for name, _ in sweep_figures(data, data.attrs["parameters"], "Random")]
     assert names == ["metrics_vs_limits_max_tool_speed_mm_s.png"]
+
+
+def test_failures_say_whose_they_are_and_stale_rows_are_counted(tmp_path: Path) -> None:
+    rows = _grid_rows()
+    rows[1]["failure"] = "machine"  # t00 failed: a worker killed
+    rows[3]["failure"] = "result"  # t01 failed: cannot be planned
+    directory = _write(tmp_path, rows)
+    frame = load_sweep(directory)
+    failure = frame.set_index("key")["failure"]
+    assert (failure["t00"], failure["t01"], failure["c00"]) == ("machine", "result", "")
+    summary = sweep_markdown(with_metrics(frame), frame.attrs["parameters"], "Grid", stale=4)
+    assert "3 failed, 1 of them for the machine's reasons: run the sweep again)" in summary
+    assert "- 4 stale rows in results.jsonl" in summary
+    with pytest.raises(InputError, match=r"no finished task to report on \(18 stale rows\)$"):
+        write_sweep_report(directory, keys=["not-a-key"])
+
+
+def test_figures_draw_the_data_they_are_given() -> None:
+    """A heat map draws its cells as given: a value, "*" where a task breaks a limit,
+    "failed" where none was planned; the other planner's cells only set the colour scale."""
+    cells = pd.DataFrame(
+        {
+            "x": [0, 1, 0, 1],
+            "y": [0, 0, 1, 1],
+            "planner": ["a", "a", "a", "b"],
+            "planned": [2, 2, 0, 1],
+            "clean": [2, 1, 0, 1],
+            "median": [1.5, 2.25, np.nan, 9.0],
+        }
+    )
+    figure = results_figures.heatmap(
+        cells, ("mu", "mass"), "a", "duration_s", "Grid", (["0.1", "0.2"], ["0", "1"])
+    )
+    axis = figure.axes[0]
+    assert sorted(text.get_text() for text in axis.texts) == ["1.5", "2.25*", "failed"]
+    assert axis.images[0].get_clim() == (1.5, 9.0)
+    assert axis.get_xlabel() == "mu" and "duration (s)" in axis.get_title()
+
+
+def test_the_figures_module_imports_no_module_that_computes() -> None:
+    """The figures take data: their module imports plotting and the report's words only
+    (never the results module, which imports it)."""
+    tree = ast.parse(Path(results_figures.__file__).read_text(encoding="utf-8"))
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    allowed = {"__future__", "math", "collections.abc", "typing", "numpy", "pandas"}
+    allowed |= {"matplotlib", "matplotlib.axes", "matplotlib.figure", "spm_opt.report.columns"}
+    assert imported <= allowed, imported - allowed

@@ -7,18 +7,23 @@ import fcntl
 import json
 import math
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
 import pytest
 import sweep_helpers
 from sweep_helpers import (
+    fails_by_kind,
     fails_on_three,
     grid_tasks,
     kills_on_three,
@@ -27,10 +32,12 @@ from sweep_helpers import (
     square,
 )
 
-from spm_opt.errors import InputError
+from spm_opt.errors import InputError, PlanningError
 from spm_opt.sweep import runner
+from spm_opt.sweep.results import load_sweep, write_sweep_report
 from spm_opt.sweep.runner import SweepSummary, run_sweep
 from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.sweep.task import failure_kind
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMING = {"worker", "finished_at", "wall_time_s", "solve_time_s"}
@@ -122,6 +129,112 @@ def test_real_tasks_cubic_pool_and_dask_give_the_same_rows(tmp_path: Path, clust
     assert all(math.isfinite(row["duration_s"]) for row in pool)
 
 
+def _start(command: list[str], cwd: Path, log: Path) -> subprocess.Popen[bytes]:
+    with open(log, "wb") as output:
+        return subprocess.Popen(
+            command, cwd=cwd, stdout=output, stderr=subprocess.STDOUT, start_new_session=True
+        )
+
+
+def _address(scheduler_file: Path) -> str | None:
+    """The address in a scheduler's file, None until it is written whole."""
+    try:
+        return json.loads(scheduler_file.read_text())["address"]
+    except (FileNotFoundError, json.JSONDecodeError, KeyError):
+        return None
+
+
+def _bounded(call: Callable[[], Any], seconds: float) -> Any:
+    """``call()`` in a thread of its own (a daemon: a hung one cannot hold the tests up);
+    TimeoutError after ``seconds``."""
+    future: Future[Any] = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(call())
+        except BaseException as error:  # noqa: BLE001 - handed to the test
+            future.set_exception(error)
+
+    threading.Thread(target=run, daemon=True).start()
+    return future.result(timeout=seconds)
+
+
+@pytest.fixture
+def separate_cluster(tmp_path: Path) -> Iterator[tuple[str, int]]:
+    """A Dask scheduler and a worker (with its nanny), each started as ``dask`` on the
+    command line on loopback, the worker in an empty directory; yields the scheduler's
+    address and the worker's session id. Both are killed at the end (and end by themselves
+    when idle or orphaned)."""
+    distributed = pytest.importorskip("distributed")
+    dask = [sys.executable, "-m", "dask"]
+    scheduler_file, empty = tmp_path / "scheduler.json", tmp_path / "empty"
+    empty.mkdir()
+    processes = []
+    try:
+        scheduler = _start(
+            [*dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard"]
+            + ["--scheduler-file", str(scheduler_file), "--idle-timeout", "300s"],
+            tmp_path,
+            tmp_path / "scheduler.log",
+        )
+        processes.append(scheduler)
+        deadline = time.monotonic() + 60
+        while (address := _address(scheduler_file)) is None:
+            log = (tmp_path / "scheduler.log").read_text()[-2000:]
+            assert scheduler.poll() is None, f"the scheduler ended: {log}"
+            assert time.monotonic() < deadline, "no scheduler within 60 s"
+            time.sleep(0.1)
+        worker = _start(
+            [*dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1"]
+            + ["--no-dashboard", "--local-directory", str(tmp_path / "dask-worker")]
+            + ["--death-timeout", "30s"],  # orphans (the tests killed) end by themselves
+            empty,
+            tmp_path / "worker.log",
+        )
+        processes.append(worker)
+        with distributed.Client(address, timeout=30, set_as_default=False) as client:
+            client.wait_for_workers(1, timeout=60)
+        yield address, worker.pid
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+            process.wait(10)
+
+
+def test_a_dask_worker_without_the_problem_files_runs_the_tasks(
+    tmp_path: Path, separate_cluster: tuple[str, int]
+) -> None:
+    """The tasks carry their files: the worker, in an empty directory, never sees them
+    (the problem's directory is renamed before the tasks run), and its rows are those of
+    this process."""
+    address, worker_session = separate_cluster
+    copy = tmp_path / "problems"
+    copy.mkdir()
+    shutil.copy(ROOT / "problems" / "craniotomy_bone_flap.toml", copy)
+    shutil.copytree(ROOT / "problems" / "robots", copy / "robots")
+    spec_file = tmp_path / "tiny.toml"
+    spec_file.write_text(
+        'name = "tiny"\nproblem = "problems/craniotomy_bone_flap.toml"\nplanners = ["cubic"]\n'
+        '[grid]\n"limits.max_tool_speed_mm_s" = [2.0, 3.0]\n"robot.payload.mass_kg" = [0.0, 0.5]\n'
+    )
+    tasks = load_sweep_spec(spec_file).tasks()
+    assert len(tasks) == 4
+    here = run_sweep(tasks, tmp_path / "here", progress=False)
+    assert here.failed == 0
+    copy.rename(tmp_path / "gone")
+
+    there = tmp_path / "there"
+    summary = _bounded(lambda: run_sweep(tasks, there, scheduler=address, progress=False), 120)
+    rows = read_rows(there)
+    assert (summary.done, summary.failed) == (4, 0), [row.get("error") for row in rows]
+    assert by_key(rows) == by_key(read_rows(tmp_path / "here"))
+    pids = {int(row["worker"].rsplit(":", 1)[1]) for row in rows}
+    assert os.getpid() not in pids
+    if PROC:
+        assert pids <= set(living_processes(worker_session))
+
+
 def test_a_second_run_resumes_and_leaves_other_rows_alone(tmp_path: Path) -> None:
     other = {"key": "someone-else0000", "planner": "cubic", "status": "ok"}
     tmp_path.joinpath("results.jsonl").write_text(json.dumps(other) + "\n")
@@ -135,6 +248,51 @@ def test_a_second_run_resumes_and_leaves_other_rows_alone(tmp_path: Path) -> Non
     assert sorted(by_key(rows[1:])) == sorted(task.key for task in tasks)
     assert run_sweep(tasks, tmp_path, progress=False, task_function=square).skipped == 6
     assert len(read_rows(tmp_path)) == 7
+
+
+def test_resume_runs_machine_failures_again_and_retry_failed_every_failure(
+    tmp_path: Path,
+) -> None:
+    tasks = grid_tasks(5, sleep=0.0)
+    first = run_sweep(tasks, tmp_path, progress=False, task_function=fails_by_kind)
+    assert (first.done, first.failed) == (2, 3)
+    failures = {row["parameters"]["x"]: row.get("failure") for row in read_rows(tmp_path)}
+    assert failures == {0: None, 1: "machine", 2: "result", 3: "result", 4: None}
+
+    again = run_sweep(tasks, tmp_path, progress=False, task_function=square)
+    assert (again.skipped, again.retried, again.done, again.failed) == (4, 1, 1, 0)
+    rows = read_rows(tmp_path)
+    assert len(rows) == 6 and rows[-1]["key"] == tasks[1].key and rows[-1]["status"] != "failed"
+
+    retry = run_sweep(tasks, tmp_path, progress=False, task_function=square, retry_failed=True)
+    assert (retry.skipped, retry.retried, retry.done, retry.failed) == (3, 2, 2, 0)
+    assert {row["key"] for row in read_rows(tmp_path)[6:]} == {tasks[2].key, tasks[3].key}
+    assert run_sweep(tasks, tmp_path, progress=False, retry_failed=True).skipped == 5
+
+    frame = load_sweep(tmp_path)  # 8 rows in the file, the newest of each key wins
+    assert len(frame) == 5 and frame["key"].is_unique
+    assert (frame["status"] != "failed").all() and (frame["failure"] == "").all()
+    write_sweep_report(tmp_path, keys=[task.key for task in tasks])
+    summary = (tmp_path / "summary.md").read_text()
+    assert "- tasks: 5 (4 ok, 1 with violations, 0 failed)" in summary
+    assert "stale" not in summary
+
+
+def test_failures_of_the_machine_are_told_from_results() -> None:
+    distributed = pytest.importorskip("distributed")
+    from distributed.comm.core import CommClosedError
+
+    machine = [
+        TimeoutError("30 s"),
+        ConnectionResetError("peer"),
+        MemoryError(),
+        BrokenProcessPool("died"),
+        distributed.scheduler.KilledWorker("task", "worker", 1),
+        CommClosedError("lost"),
+    ]
+    results = [PlanningError("infeasible"), InputError("x = 3"), ZeroDivisionError("bug")]
+    assert [failure_kind(error) for error in machine] == ["machine"] * len(machine)
+    assert [failure_kind(error) for error in results] == ["result"] * len(results)
 
 
 def test_a_torn_last_line_is_cut_before_appending(tmp_path: Path) -> None:
@@ -202,6 +360,7 @@ def test_a_task_that_raises_is_a_failed_row(tmp_path: Path, workers: int) -> Non
     failed = rows[tasks[3].key]
     assert failed["status"] == "failed" and failed["parameters"] == {"x": 3, "sleep": 0.0}
     assert failed["error"] == "ZeroDivisionError: x = 3 is not allowed"
+    assert failed["failure"] == "result"  # a bug: the same again on resume
     assert "fails_on_three" in failed["traceback"]
     assert all(row["status"] != "failed" for key, row in rows.items() if key != tasks[3].key)
 
@@ -217,7 +376,16 @@ def test_a_task_function_that_returns_no_row_gives_failed_rows(tmp_path: Path) -
     assert summary.failed == 2
     row = read_rows(tmp_path / "set")[0]
     assert row["error"] == "the row is not JSON (Object of type set is not JSON serializable)"
-    assert set(row) == {"key", "sweep", "planner", "parameters", "status", "error"} | TIMING - {
+    assert row["failure"] == "result"
+    assert set(row) == {
+        "key",
+        "sweep",
+        "planner",
+        "parameters",
+        "status",
+        "error",
+        "failure",
+    } | TIMING - {
         "wall_time_s",
         "solve_time_s",
     }
@@ -233,6 +401,7 @@ def test_a_worker_killed_on_the_pool_fails_its_task_only(tmp_path: Path) -> None
     assert killed["status"] == "failed"
     assert killed["error"].startswith("BrokenProcessPool: ")
     assert killed["error"].endswith("(the worker died running this task alone)")
+    assert killed["failure"] == "machine"
 
 
 def test_a_worker_killed_on_dask_is_a_failed_row(tmp_path: Path, cluster: Any) -> None:
@@ -247,6 +416,7 @@ def test_a_worker_killed_on_dask_is_a_failed_row(tmp_path: Path, cluster: Any) -
     assert summary.failed == 1
     [row] = read_rows(tmp_path)
     assert row["status"] == "failed" and row["error"].startswith("KilledWorker: ")
+    assert row["failure"] == "machine"
 
 
 @pytest.mark.slow
@@ -327,5 +497,5 @@ def test_a_task_function_that_cannot_be_pickled_is_refused_for_the_pool(tmp_path
 
 def test_nothing_to_do_starts_nothing(tmp_path: Path) -> None:
     summary = run_sweep([], tmp_path, workers=2, progress=False, task_function=square)
-    assert summary == SweepSummary(0, 0, 0, 0, summary.seconds)
+    assert summary == SweepSummary(0, 0, 0, 0, 0, summary.seconds)
     assert read_rows(tmp_path) == []

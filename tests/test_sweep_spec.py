@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
 from pathlib import Path
 
 import pytest
 
 import spm_opt as so
 from spm_opt.sweep.spec import load_sweep_spec
-from spm_opt.sweep.task import run_task
+from spm_opt.sweep.task import ProblemFiles, _anchor_plan, code_identity, run_task
 
 ROOT = Path(__file__).resolve().parents[1]
 SWEEPS = ROOT / "problems" / "sweeps"
@@ -105,6 +106,10 @@ def test_shipped_grid_sweeps_expand(name):
         ),
         (('planners = ["cubic", "ruckig"]', 'planner = ["cubic"]'), "planner: unknown key"),
         (
+            ('"robot.friction.mu" = [0.04, 0.24]', '"robot" = ["robots/prototype.toml"]'),
+            "grid.robot = 'robots/prototype.toml': the robot file cannot be swept",
+        ),
+        (
             (f'problem = "{PROBLEM}"', 'problem = "nowhere.toml"'),
             "problem = 'nowhere.toml': no problem file",
         ),
@@ -120,6 +125,7 @@ def test_shipped_grid_sweeps_expand(name):
         "fractional",
         "unknown-planner",
         "typo-key",
+        "robot-file",
         "no-problem",
     ],
 )
@@ -153,3 +159,61 @@ def test_a_warm_started_row_does_not_depend_on_what_ran_before(tmp_path):
         k: v for k, v in alone.items() if k not in steady
     }
     assert alone["status"] == "ok"
+
+
+def test_a_task_carries_its_files_and_runs_where_they_are_not(tmp_path):
+    """The problem names its robot file by ``../robots/...``: a task, run after the
+    directory is gone, writes both in that layout and gives the row it gave before; an
+    error names the problem file where the runner read it."""
+    (tmp_path / "flaps").mkdir()
+    text = Path(PROBLEM).read_text().replace('"robots/prototype.toml"', '"../robots/p.toml"')
+    (tmp_path / "flaps" / "flap.toml").write_text(text)
+    (tmp_path / "robots").mkdir()
+    shutil.copy(ROOT / "problems" / "robots" / "prototype.toml", tmp_path / "robots" / "p.toml")
+    spec = GOOD.replace(PROBLEM, (tmp_path / "flaps" / "flap.toml").as_posix())
+    task = load_sweep_spec(write(tmp_path, spec)).tasks()[0]
+    before = run_task(task)
+    (tmp_path / "flaps").rename(tmp_path / "elsewhere")
+    shutil.rmtree(tmp_path / "robots")
+    steady = ("wall_time_s", "solve_time_s")
+    after = run_task(task)
+    assert after["status"] != "failed", after["error"]
+    assert {k: v for k, v in after.items() if k not in steady} == {
+        k: v for k, v in before.items() if k not in steady
+    }
+    bad = dataclasses.replace(task, overrides={"limits.max_tool_speed_mm_s": -1.0})
+    row = run_task(bad)
+    assert row["failure"] == "result"
+    assert row["error"].startswith(f"InputError: {tmp_path / 'flaps' / 'flap.toml'}: limits.")
+
+
+def test_a_robot_file_named_by_an_absolute_path_is_refused(tmp_path):
+    robot = (ROOT / "problems" / "robots" / "prototype.toml").as_posix()
+    text = Path(PROBLEM).read_text().replace('"robots/prototype.toml"', f'"{robot}"')
+    (tmp_path / "absolute.toml").write_text(text)
+    with pytest.raises(so.InputError) as caught:
+        load_sweep_spec(write(tmp_path, GOOD.replace(PROBLEM, f"{tmp_path}/absolute.toml")))
+    message = str(caught.value)
+    assert "robot = " in message and "relative to the problem file" in message
+    assert "\n" not in message
+
+
+def test_a_worker_with_other_code_refuses_the_task(tmp_path):
+    task = load_sweep_spec(write(tmp_path, GOOD)).tasks()[0]
+    assert task.code == code_identity() and task.code.startswith(f"{so.__version__}+")
+    row = run_task(dataclasses.replace(task, code="0.0.1+0123456789abcdef"))
+    assert row["status"] == "failed" and row["failure"] == "machine"
+    assert row["error"] == (
+        f"this worker runs spm_opt {code_identity()}, the task was made by 0.0.1+0123456789abcdef"
+    )
+
+
+def test_anchor_plans_are_kept_by_the_files_contents():
+    """Two problem files of one path but other contents have their own anchors."""
+    files = ProblemFiles.read(PROBLEM)
+    longer = dataclasses.replace(
+        files, text=files.text.replace("[10.0, 10.0, 10.0, 10.0]", "[12.0, 12.0, 12.0, 12.0]")
+    )
+    assert longer.text != files.text and longer.path == files.path
+    assert _anchor_plan(files, "cubic", "{}").duration == pytest.approx(40.0)
+    assert _anchor_plan(longer, "cubic", "{}").duration == pytest.approx(48.0)

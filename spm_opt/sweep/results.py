@@ -7,7 +7,7 @@
 The report goes beside the results, all files or none: ``results.parquet`` and
 ``results.csv`` (the table), ``summary.md`` (counts, robustness per planner, the commonest
 failures and violations, the medians per value of every swept parameter) and the figures
-of :mod:`spm_opt.sweep.results_figures`.
+(:func:`sweep_figures`: the tables here, drawn by :mod:`spm_opt.sweep.results_figures`).
 
 A task is *planned* when its status is not "failed" and *clean* when it is "ok" (planned
 with no limit violated); the metrics' medians are over the planned tasks.
@@ -19,35 +19,42 @@ import io
 import json
 import logging
 import math
-from collections.abc import Sequence
+import re
+from collections.abc import Collection, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
-from spm_opt.comparison import COLUMNS
 from spm_opt.errors import InputError
 from spm_opt.files import write_atomically
+from spm_opt.report.columns import COLUMNS, column
+from spm_opt.report.markdown import markdown_table
+from spm_opt.sweep import results_figures as draw
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 _LOG = logging.getLogger(__name__)
 
 RESULTS_FILE = "results.jsonl"
 """The file, in a sweep's directory, that the runner appends one row per task to."""
-_TEXT = ("status", "violations", "error")
+_TEXT = ("status", "violations", "error", "failure")
 NUMERIC_COLUMNS = tuple(c for c in COLUMNS if c not in ("planner", *_TEXT))
 """The comparison's numeric columns: a number or null in every row."""
 
-METRICS = {  # column: (table heading, axis label)
-    "duration_s": ("duration s", "duration (s)"),
-    "duration_over_lower_bound": ("over bound", "duration / lower bound"),
-    "max_contour_deviation_mm": ("max dev. mm", "max contour deviation (mm)"),
-    "max_tool_speed_mm_s": ("max tool mm/s", "max tool speed (mm/s)"),
-    "peak_torque_nm": ("peak τ N·m", "peak torque, larger joint (N·m)"),
-    "effort_n2m2s": ("∫τᵀτ N²m²s", "effort ∫τᵀτ dt (N²·m²·s)"),
-    "wall_time_s": ("wall s", "wall time (s)"),
-}
-"""The key metrics the summary and the figures show; ``peak_torque_nm`` is the larger of
-the two joints' peak torques."""
+METRICS = (
+    "duration_s",
+    "duration_over_lower_bound",
+    "max_contour_deviation_mm",
+    "max_tool_speed_mm_s",
+    "peak_torque_nm",
+    "effort_n2m2s",
+    "wall_time_s",
+)
+"""The key metrics the summary and the figures show, headed and labelled as
+:func:`spm_opt.report.columns.column` says; ``peak_torque_nm`` is the larger of the two
+joints' peak torques."""
 
 FLAP = "flap"
 """The parameter naming a generated bone flap (an index: never an axis)."""
@@ -72,9 +79,11 @@ def load_sweep(directory: str | Path) -> pd.DataFrame:
     pandas.DataFrame
         Columns ``key``, ``sweep``, ``planner``, then one column per parameter named by its
         key (``robot.friction.mu``; NaN where a task lacks it), then every column of
-        :data:`spm_opt.comparison.COLUMNS` (NaN, or "" for text, where a row lacks it), then
-        any other field (``worker``, ``finished_at``...). A task written twice keeps its
-        last row. ``frame.attrs["parameters"]`` lists the parameter columns.
+        :data:`spm_opt.report.columns.COLUMNS` (NaN, or "" for text, where a row lacks it),
+        ``failure`` ("machine" or "result" for a failed task, else ""), then any other field
+        (``worker``, ``finished_at``...). A task written twice (run again after it failed)
+        is its newest row, the file's last of its key. ``frame.attrs["parameters"]`` lists
+        the parameter columns.
 
     Raises
     ------
@@ -108,14 +117,14 @@ def load_sweep(directory: str | Path) -> pd.DataFrame:
         rows.append(_checked(row, f"{path}, line {number}"))
         parameters.update(dict.fromkeys(rows[-1]["parameters"]))
     flat = [{**row.pop("parameters"), **row} for row in rows]
-    known = ["key", "sweep", "planner", *parameters, *COLUMNS]
+    known = ["key", "sweep", "planner", *parameters, *COLUMNS, "failure"]
     others = {name: None for row in flat for name in row if name not in known}
     frame = pd.DataFrame(flat, columns=list(dict.fromkeys([*known, *others])))
     frame = frame.drop_duplicates("key", keep="last").reset_index(drop=True)
     for name in NUMERIC_COLUMNS:
         frame[name] = frame[name].astype(float)
     for name in _TEXT:
-        frame[name] = frame[name].fillna("")
+        frame[name] = frame[name].astype("str").fillna("")
     frame.attrs["parameters"] = list(parameters)
     return frame
 
@@ -132,7 +141,7 @@ def _checked(row: Any, where: str) -> dict[str, Any]:
     if not isinstance(parameters, dict):
         raise InputError(f"{where}: 'parameters' must be an object, got {parameters!r}")
     for name in parameters:
-        if name in row or name in COLUMNS:
+        if name in row or name in COLUMNS or name == "failure":
             raise InputError(f"{where}: parameter {name!r} has the name of a field")
     for name in NUMERIC_COLUMNS:
         value = row.get(name)
@@ -141,7 +150,9 @@ def _checked(row: Any, where: str) -> dict[str, Any]:
     return row
 
 
-def write_sweep_report(directory: str | Path, title: str | None = None) -> list[Path]:
+def write_sweep_report(
+    directory: str | Path, title: str | None = None, keys: Collection[str] | None = None
+) -> list[Path]:
     """Write a sweep's table, summary and figures into its directory, all or none.
 
     Parameters
@@ -150,25 +161,34 @@ def write_sweep_report(directory: str | Path, title: str | None = None) -> list[
         The sweep's directory, holding ``results.jsonl``.
     title : str, optional
         The summary's heading; by default "Sweep <name>".
+    keys : collection of str, optional
+        The keys of the sweep's current tasks: the table, the summary and the figures show
+        their rows alone, and the summary counts the others, stale (another specification,
+        or another version of the code). By default every row.
 
     Returns
     -------
     list of Path
         Every file written, sorted: ``results.parquet``, ``results.csv``, ``summary.md``
-        and the figures (see :func:`spm_opt.sweep.results_figures.sweep_figures`).
+        and the figures (see :func:`sweep_figures`).
 
     Raises
     ------
     InputError
-        As :func:`load_sweep`, or the sweep has no finished task yet.
+        As :func:`load_sweep`, or the sweep has no finished (current) task yet.
     """
     from spm_opt.plots import to_png
-    from spm_opt.sweep.results_figures import sweep_figures
 
     directory = Path(directory)
     frame = load_sweep(directory)
+    current = frame["key"].isin(set(keys)) if keys is not None else frame["key"].notna()
+    stale = int((~current).sum())
+    frame = frame[current].reset_index(drop=True)
     if frame.empty:
-        raise InputError(f"{directory / RESULTS_FILE}: no finished task to report on")
+        raise InputError(
+            f"{directory / RESULTS_FILE}: no finished task to report on"
+            + (f" ({stale} stale rows)" if stale else "")
+        )
     name = ", ".join(str(s) for s in frame["sweep"].dropna().unique()) or directory.name
     data = with_metrics(frame)
     parameters = frame.attrs["parameters"]
@@ -181,12 +201,98 @@ def write_sweep_report(directory: str | Path, title: str | None = None) -> list[
         directory / "results.parquet": parquet.getvalue(),
         directory / "results.csv": frame.to_csv(index=False),
         directory / "summary.md": sweep_markdown(
-            data, parameters, title or f"Sweep {name}", [path.name for path in figures]
+            data, parameters, title or f"Sweep {name}", [path.name for path in figures], stale
         ),
         **figures,
     }
     write_atomically(contents)
     return sorted(contents)
+
+
+def sweep_figures(
+    data: pd.DataFrame, parameters: Sequence[str], name: str
+) -> Iterator[tuple[str, Figure]]:
+    """Every figure of a sweep, as (file name, figure).
+
+    Parameters
+    ----------
+    data : pandas.DataFrame
+        The sweep's table with its key metrics (:func:`with_metrics`).
+    parameters : sequence of str
+        Its parameter columns.
+    name : str
+        The sweep's name, for the titles.
+
+    Yields
+    ------
+    (str, Figure)
+        ``metrics_vs_<parameter>.png`` for each swept numeric parameter (the key metrics
+        against it); ``heatmap_<planner>_<metric>.png`` for each planner and key metric
+        when exactly two parameters are swept, each over at most :data:`MAX_LEVELS`
+        values; ``flap_robustness.png`` and ``flap_histograms.png`` when the sweep has
+        generated flaps. Names are filesystem-safe (:func:`safe_name`).
+    """
+    metrics = shown_metrics(data)
+    swept = swept_parameters(data, parameters)
+    planners = list(planner_order(data).cat.categories)
+    for parameter in swept:
+        yield f"metrics_vs_{safe_name(parameter)}.png", _against(data, parameter, metrics, name)
+    if len(swept) == 2 and all(data[p].nunique() <= MAX_LEVELS for p in swept):
+        grid = (swept[0], swept[1])
+        cells = {metric: _cells(data, grid, metric) for metric in metrics}
+        across, up = ([level_label(v) for v in sorted(data[p].dropna().unique())] for p in grid)
+        for planner in planners:
+            for metric in metrics:
+                figure = draw.heatmap(cells[metric], grid, planner, metric, name, (across, up))
+                yield f"heatmap_{safe_name(planner)}_{metric}.png", figure
+    if FLAP in parameters:
+        table = robustness(data, [planner_order(data)], [])
+        yield "flap_robustness.png", draw.flap_robustness(table, data[FLAP].nunique(), name)
+        if metrics:
+            points = data.loc[data["status"] != "failed", ["planner", *metrics]]
+            yield "flap_histograms.png", draw.histograms(points, planners, name)
+
+
+def safe_name(text: str) -> str:
+    """``robot.friction.mu`` → ``robot_friction_mu``: letters, digits, "-" and "_" only."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_") or "_"
+
+
+def _against(data: pd.DataFrame, parameter: str, metrics: Sequence[str], name: str) -> Figure:
+    """The key metrics against ``parameter``: the planned tasks, and per planner the
+    medians per value (or quantile bin) over every other parameter."""
+    level = groups(data[parameter])
+    planner = planner_order(data)
+    medians = robustness(data, [level, planner], metrics)
+    medians["at"] = data[parameter].groupby([level, planner], observed=True).median()
+    points = data.loc[data["status"] != "failed", ["planner", parameter, *metrics]]
+    binned = isinstance(level.dtype, pd.CategoricalDtype)
+    return draw.against(
+        points,
+        medians.reset_index(level=-1),
+        parameter,
+        list(planner.cat.categories),
+        name,
+        level.nunique() if binned else None,
+    )
+
+
+def _cells(data: pd.DataFrame, grid: tuple[str, str], metric: str) -> pd.DataFrame:
+    """The cells of a heat map of ``metric`` over two parameters, for every planner (see
+    :func:`spm_opt.sweep.results_figures.heatmap`)."""
+    x, y = grid
+    table = robustness(data, [data[x], data[y], planner_order(data)], [metric]).reset_index()
+    index = {p: {v: k for k, v in enumerate(sorted(data[p].dropna().unique()))} for p in grid}
+    return pd.DataFrame(
+        {
+            "x": table[x].map(index[x]),
+            "y": table[y].map(index[y]),
+            "planner": table["planner"],
+            "planned": table["planned"],
+            "clean": table["clean"],
+            "median": table[metric],
+        }
+    )
 
 
 def with_metrics(frame: pd.DataFrame) -> pd.DataFrame:
@@ -253,21 +359,26 @@ def level_label(value: Any) -> str:
 
 
 def sweep_markdown(
-    data: pd.DataFrame, parameters: Sequence[str], title: str, figures: Sequence[str] = ()
+    data: pd.DataFrame,
+    parameters: Sequence[str],
+    title: str,
+    figures: Sequence[str] = (),
+    stale: int = 0,
 ) -> str:
     """The summary: counts, robustness per planner, failures, violations, the medians per
     value of each swept parameter, and links to the ``figures`` (file names).
 
-    ``data`` is a sweep's table with its key metrics (:func:`with_metrics`).
+    ``data`` is a sweep's table with its key metrics (:func:`with_metrics`); ``stale``
+    counts the results file's rows left out (not of the sweep's current tasks).
     """
     metrics = shown_metrics(data)
     swept = swept_parameters(data, parameters)
     planner = planner_order(data)
-    lines = [f"# {title}", "", *_overview(data, parameters, swept), ""]
+    lines = [f"# {title}", "", *_overview(data, parameters, swept, stale), ""]
 
     counts = [("all", data)] + [(name, data[planner == name]) for name in planner.cat.categories]
     lines += ["## Counts", ""]
-    lines += _table(
+    lines += markdown_table(
         ["planner", "tasks", "ok", "with violations", "failed"],
         [[name, len(part), *_outcome_counts(part["status"])] for name, part in counts],
     )
@@ -278,9 +389,9 @@ def sweep_markdown(
         "",
     ]
     table = robustness(data, [planner], metrics)
-    lines += _table(
+    lines += markdown_table(
         ["planner", "tasks", "planned", "clean", "planned %", "clean %"]
-        + [f"median {METRICS[m][0]}" for m in metrics],
+        + [f"median {column(m).heading}" for m in metrics],
         [[name, *_robustness_cells(row, metrics)] for name, row in table.iterrows()],
     )
 
@@ -296,9 +407,9 @@ def sweep_markdown(
             "",
         ]
         table = robustness(data, [level.rename(name), planner], metrics)
-        lines += _table(
+        lines += markdown_table(
             [name, "planner", "tasks", "planned", "clean", "planned %", "clean %"]
-            + [f"median {METRICS[m][0]}" for m in metrics],
+            + [f"median {column(m).heading}" for m in metrics],
             [
                 [level_label(value), planner_name, *_robustness_cells(row, metrics)]
                 for (value, planner_name), row in table.iterrows()
@@ -310,12 +421,21 @@ def sweep_markdown(
     return "\n".join(lines) + "\n"
 
 
-def _overview(data: pd.DataFrame, parameters: Sequence[str], swept: Sequence[str]) -> list[str]:
+def _overview(
+    data: pd.DataFrame, parameters: Sequence[str], swept: Sequence[str], stale: int
+) -> list[str]:
     ok, violations, failed = _outcome_counts(data["status"])
+    machine = int((data["failure"] == "machine").sum())
     lines = [
-        f"- tasks: {len(data)} ({ok} ok, {violations} with violations, {failed} failed); "
-        f"planners: {', '.join(data['planner'].unique())}"
+        f"- tasks: {len(data)} ({ok} ok, {violations} with violations, {failed} failed"
+        + (f", {machine} of them for the machine's reasons: run the sweep again" if machine else "")
+        + f"); planners: {', '.join(data['planner'].unique())}"
     ]
+    if stale:
+        lines.append(
+            f"- {stale} stale rows in {RESULTS_FILE} (of tasks not in this sweep: another "
+            "specification or another version of spm_opt) are left out"
+        )
     for name in swept:
         values = data[name].dropna()
         if values.nunique() <= MAX_LEVELS:
@@ -345,7 +465,7 @@ def _failures(data: pd.DataFrame) -> list[str]:
         return ["No task failed."]
     message = failed["error"].str.slice(0, 80)
     counts = message.value_counts()
-    lines = _table(
+    lines = markdown_table(
         ["tasks", "planners", "error (first 80 characters)"],
         [
             [count, _planners(failed[message == text]), f"`{text}`" if text else "—"]
@@ -364,7 +484,7 @@ def _violations(data: pd.DataFrame) -> list[str]:
     if violated.empty:
         return ["No planned task breaks a limit."]
     limits = violated.assign(limit=violated["violations"].map(_limits)).explode("limit")
-    return _table(
+    return markdown_table(
         ["limit", "tasks", "planners"],
         [
             [text, count, _planners(limits[limits["limit"] == text])]
@@ -399,13 +519,3 @@ def _limits(violations: str) -> list[str]:
 def _planners(rows: pd.DataFrame) -> str:
     """``cubic (3), toppra (1)``: how many of the rows each planner has."""
     return ", ".join(f"{name} ({count})" for name, count in rows["planner"].value_counts().items())
-
-
-def _table(headings: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
-    """A markdown table; "|" in a cell is escaped."""
-
-    def cell(value: object) -> str:
-        return str(value).replace("|", "\\|").replace("\n", " ")
-
-    lines = ["| " + " | ".join(headings) + " |", "|" + "---|" * len(headings)]
-    return lines + ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]

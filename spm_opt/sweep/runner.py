@@ -7,18 +7,24 @@ Every finished task is one JSON line of ``DIR/results.jsonl``, appended in the o
 tasks finish with one ``os.write`` of the whole line on an ``O_APPEND`` descriptor and
 ``os.fsync`` (a fraction of a millisecond a row): a crash, even ``kill -9``, leaves whole
 rows and at most a torn last line. Running the same tasks again resumes: the keys of the
-file's complete lines are done and skipped; a torn last line is cut off before anything
-is appended. The runner adds ``worker`` (``host:pid`` of the process that ran the task)
-and ``finished_at`` (ISO 8601 UTC, the runner's clock when the row arrived) to each row,
-and writes NaN and infinities as ``null``, so the file is standard JSON lines.
+file's complete lines are done and skipped, unless the key's newest row failed for the
+machine's reasons (``failure`` "machine": a worker killed, a lost connection, a timeout),
+or failed at all with ``retry_failed``; a torn last line is cut off before anything is
+appended. A task run again appends its new row: the newest row of a key is the task's
+(:func:`spm_opt.sweep.results.load_sweep` keeps it alone). The runner adds ``worker``
+(``host:pid`` of the process that ran the task) and ``finished_at`` (ISO 8601 UTC, the
+runner's clock when the row arrived) to each row, and writes NaN and infinities as
+``null``, so the file is standard JSON lines.
 
 A task that raises anyway (a bug) or whose worker dies is a row with status "failed", its
-error and, when it raised, its traceback; the sweep goes on. On the process pool, a dead
-worker breaks the pool: the pool is started again and the tasks that were in flight are
-run again one at a time, so that the task that kills its worker is told apart from the
-innocent ones (a failed row "...died running this task alone") and the others succeed. On
-Dask, the scheduler retries a task whose worker died and gives up with ``KilledWorker``
-(after ``distributed.scheduler.allowed-failures`` deaths), which becomes its row.
+error, its ``failure`` kind (:func:`spm_opt.sweep.task.failure_kind`) and, when it raised,
+its traceback; the sweep goes on. On the process pool, a dead worker breaks the pool: the
+pool is started again and the tasks that were in flight are run again one at a time, so
+that the task that kills its worker is told apart from the innocent ones (a failed row
+"...died running this task alone", a machine failure) and the others succeed. On Dask,
+the scheduler retries a task whose worker died and gives up with ``KilledWorker`` (after
+``distributed.scheduler.allowed-failures`` deaths), which becomes its row (a machine
+failure too).
 
 The pool's workers are started from a fork server that imported ``spm_opt`` once (about
 1.3 s for the first pool, 0.05 s for a restart; "spawn" takes 2.7 s a pool on two cores,
@@ -62,7 +68,7 @@ from tqdm import tqdm
 
 from spm_opt.errors import InputError, SpmOptError
 from spm_opt.sweep.results import RESULTS_FILE
-from spm_opt.sweep.task import Task, run_task
+from spm_opt.sweep.task import MACHINE, RESULT, Task, failure_kind, run_task
 
 _LOG = logging.getLogger(__name__)
 
@@ -86,6 +92,9 @@ class SweepSummary:
         Tasks given.
     skipped : int
         Tasks already in the results file, not run again.
+    retried : int
+        Tasks run again because their newest row had failed (for the machine's reasons, or
+        at all with ``retry_failed``); they count in ``done`` or ``failed`` too.
     done : int
         Tasks run now that planned (status "ok" or with violations).
     failed : int
@@ -96,6 +105,7 @@ class SweepSummary:
 
     total: int
     skipped: int
+    retried: int
     done: int
     failed: int
     seconds: float
@@ -109,8 +119,10 @@ def run_sweep(
     scheduler: str | None = None,
     progress: bool = True,
     task_function: TaskFunction = run_task,
+    retry_failed: bool = False,
 ) -> SweepSummary:
-    """Run every task not yet in ``out/results.jsonl`` and append one row per task.
+    """Run every task not yet in ``out/results.jsonl``, or whose newest row there failed
+    for the machine's reasons, and append one row per task run.
 
     Parameters
     ----------
@@ -126,13 +138,16 @@ def run_sweep(
     scheduler : str, optional
         None: a local process pool. ``"local"``: a Dask ``LocalCluster`` of ``workers``
         processes of one thread each on 127.0.0.1. ``"tcp://HOST:PORT"``: the Dask
-        scheduler there; its workers need spm_opt installed and the problem files at the
-        same paths, and are best started with one thread each.
+        scheduler there; its workers need the same spm_opt installed (the tasks carry the
+        problem files' contents), and are best started with one thread each.
     progress : bool
         Show a progress bar on stderr with the counts done, failed and remaining.
     task_function : callable
         Runs one task and returns its row (default :func:`spm_opt.sweep.task.run_task`);
         it must be importable by the workers (a module-level function).
+    retry_failed : bool
+        Run again every task whose newest row failed, results (a planning or input error)
+        as well as the machine's failures.
 
     Returns
     -------
@@ -156,17 +171,19 @@ def run_sweep(
     name = tasks[0].sweep if tasks else "sweep"
     done = failed = 0
     with _ResultsFile(Path(out)) as results:
-        pending = [task for task in tasks if task.key not in results.finished]
+        pending = [task for task in tasks if results.to_run(task.key, retry_failed)]
         skipped = len(tasks) - len(pending)
-        others = len(results.finished - keys)
+        retried = sum(task.key in results.finished for task in pending)
+        stale = len(results.finished.keys() - keys)
         _LOG.info(
-            "%s: %d tasks, %d already in %s%s, %d to run on %s",
+            "%s: %d tasks, %d already in %s%s, %d to run (%d of them failed before) on %s",
             name,
             len(tasks),
             skipped,
             results.path,
-            f" (and {others} rows of other tasks)" if others else "",
+            f" (and {stale} stale rows of other tasks)" if stale else "",
             len(pending),
+            retried,
             _where(workers, scheduler),
         )
         if pending and scheduler is None and workers > 1:
@@ -192,7 +209,8 @@ def run_sweep(
                 remaining = len(pending) - done - failed
                 bar.set_postfix(done=done, failed=failed, remaining=remaining, refresh=False)
                 bar.update()
-    summary = SweepSummary(len(tasks), skipped, done, failed, time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+    summary = SweepSummary(len(tasks), skipped, retried, done, failed, seconds)
     _LOG.info(
         "%s: %d done, %d failed, %d skipped in %.1f s", name, done, failed, skipped, summary.seconds
     )
@@ -257,7 +275,8 @@ def _where(workers: int, scheduler: str | None) -> str:
 
 class _ResultsFile:
     """``out/results.jsonl``, locked while the sweep runs (the lock goes with the process),
-    its torn last line cut off; :attr:`finished` holds the keys of its rows."""
+    its torn last line cut off; :attr:`finished` maps the key of each of its rows to the
+    ``failure`` of the key's newest row (None if it did not fail)."""
 
     def __init__(self, out: Path) -> None:
         if out.exists() and not out.is_dir():
@@ -267,7 +286,7 @@ class _ResultsFile:
         self._fd = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
         try:
             self._lock()
-            self.finished = self._finished_keys()
+            self.finished = self._finished()
         except BaseException:
             os.close(self._fd)
             raise
@@ -278,6 +297,14 @@ class _ResultsFile:
     def __exit__(self, *exception: object) -> None:
         os.close(self._fd)
 
+    def to_run(self, key: str, retry_failed: bool) -> bool:
+        """Whether the task ``key`` runs: no row yet, or its newest failed for the
+        machine's reasons (for any reason with ``retry_failed``)."""
+        if key not in self.finished:
+            return True
+        failure = self.finished[key]
+        return failure is not None and (retry_failed or failure == MACHINE)
+
     def append(self, row: Row) -> Row:
         """Write the row as one JSON line and sync it to disk; the row as written (a
         failed row if it cannot be written as JSON)."""
@@ -285,7 +312,7 @@ class _ResultsFile:
         try:
             text = json.dumps(_plain(row), allow_nan=False)
         except (TypeError, ValueError) as error:
-            row = {**_failed(row, f"the row is not JSON ({error})"), **_runner_fields(row)}
+            row = {**_failed(row, f"the row is not JSON ({error})", RESULT), **_runner_fields(row)}
             text = json.dumps(_plain(row), allow_nan=False)
         data = memoryview((text + "\n").encode())
         while data:
@@ -302,7 +329,7 @@ class _ResultsFile:
                 "sweep; wait for it or choose another directory"
             ) from None
 
-    def _finished_keys(self) -> set[str]:
+    def _finished(self) -> dict[str, str | None]:
         data = b""
         while chunk := os.pread(self._fd, 1 << 20, len(data)):
             data += chunk
@@ -311,7 +338,7 @@ class _ResultsFile:
             _LOG.warning("%s: torn last line (%d bytes) removed", self.path, len(data) - end)
             os.ftruncate(self._fd, end)
             os.fsync(self._fd)
-        keys = set()
+        finished: dict[str, str | None] = {}
         for number, line in enumerate(data[:end].splitlines(), start=1):
             if not line.strip():
                 continue
@@ -323,8 +350,15 @@ class _ResultsFile:
                 raise InputError(
                     f"{self.path}, line {number}: expected a JSON object with a text 'key'"
                 )
-            keys.add(row["key"])
-        return keys
+            finished[row["key"]] = _failure(row)
+        return finished
+
+
+def _failure(row: Row) -> str | None:
+    """A row's ``failure``: None if it did not fail; a result if it does not say."""
+    if row.get("status") != "failed":
+        return None
+    return MACHINE if row.get("failure") == MACHINE else RESULT
 
 
 def _runner_fields(row: Row) -> Row:
@@ -356,8 +390,10 @@ def _call(task_function: TaskFunction, task: Task) -> Row:
         if not isinstance(result, dict) or not isinstance(result.get("status"), str):
             raise TypeError(f"the task function returned {_shown(result)}, not a row")
         row = {**_identity(task), **{k: v for k, v in result.items() if k != "key"}}
+        if row["status"] == "failed":
+            row.setdefault("failure", RESULT)
     except Exception as error:  # noqa: BLE001 - a task's bug is its row, not the sweep's end
-        row = _failed(_identity(task), _describe(error))
+        row = _failed(_identity(task), _describe(error), failure_kind(error))
         row["traceback"] = "".join(traceback.format_exception(error))
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
     return row
@@ -372,9 +408,9 @@ def _identity(task: Task) -> Row:
     }
 
 
-def _failed(row: Row, error: str) -> Row:
+def _failed(row: Row, error: str, failure: str) -> Row:
     identity = {k: row[k] for k in ("key", "sweep", "planner", "parameters") if k in row}
-    return {**identity, "status": "failed", "error": error}
+    return {**identity, "status": "failed", "error": error, "failure": failure}
 
 
 def _shown(result: object) -> str:
@@ -485,10 +521,10 @@ def _pool_rows(tasks: list[Task], task_function: TaskFunction, workers: int) -> 
                 elif not isinstance(error, Exception):
                     raise error  # Ctrl-C reached the worker too: the sweep stops
                 elif not isinstance(error, BrokenProcessPool):
-                    yield _failed(_identity(task), _describe(error))
+                    yield _failed(_identity(task), _describe(error), failure_kind(error))
                 elif alone:
                     message = f"{_describe(error)} (the worker died running this task alone)"
-                    yield _failed(_identity(task), message)
+                    yield _failed(_identity(task), message, MACHINE)
                 else:
                     suspects.append(task)
     finally:
@@ -568,7 +604,7 @@ def _client_rows(client: Any, tasks: list[Task], task_function: TaskFunction) ->
                     "the rows so far are kept: run again to resume"
                 ) from None
             except Exception as error:  # noqa: BLE001 - KilledWorker, a lost result: a row
-                row = _failed(_identity(task), _describe(error))
+                row = _failed(_identity(task), _describe(error), failure_kind(error))
             future.release()
             yield row
     finally:

@@ -30,7 +30,6 @@ one-line error naming it.
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,7 +42,7 @@ from spm_opt.fields import Table, read_toml
 from spm_opt.planners import PLANNERS
 from spm_opt.planners.registry import takes_warm_start
 from spm_opt.problem import Problem, load_problem
-from spm_opt.sweep.task import Task, task_key
+from spm_opt.sweep.task import ProblemFiles, Task, code_identity, task_key
 
 
 @dataclass(frozen=True)
@@ -122,34 +121,27 @@ class SweepSpec:
 
     def tasks(self) -> list[Task]:
         """Every task of the sweep: each parameter set with each planner; a planner that
-        takes a warm start starts from the plan of the task's anchor (see :class:`Task`)."""
-        problem = load_problem(self.problem_path)
-        identity = _files_hash(problem)
+        takes a warm start starts from the plan of the task's anchor (see :class:`Task`).
+        Each task carries the problem's files (their contents) and this process's code."""
+        files = ProblemFiles.read(self.problem_path)
+        code = code_identity()
         tasks = []
-        for parameters, overrides, cut in self.parameter_sets(problem):
+        for parameters, overrides, cut in self.parameter_sets(load_problem(self.problem_path)):
             for planner in self.planners:
                 anchor = cut if takes_warm_start(planner) and overrides != cut else None
                 tasks.append(
                     Task(
-                        key=task_key(identity, planner, overrides, anchor),
+                        key=task_key(files.sha256, planner, overrides, anchor, code=code),
                         sweep=self.name,
-                        problem_path=str(self.problem_path),
+                        problem=files,
                         planner=planner,
+                        code=code,
                         parameters=parameters,
                         overrides=overrides,
                         anchor=anchor,
                     )
                 )
         return tasks
-
-
-def _files_hash(problem: Problem) -> str:
-    """SHA-256 of the problem file and its robot file: a changed file makes new tasks."""
-    digest = hashlib.sha256()
-    digest.update((problem.source_sha256 or "").encode())
-    robot = problem.source.parent / read_toml(problem.source)["robot"]
-    digest.update(robot.read_bytes())
-    return digest.hexdigest()
 
 
 def load_sweep_spec(path: str | Path) -> SweepSpec:
@@ -163,6 +155,7 @@ def load_sweep_spec(path: str | Path) -> SweepSpec:
     if not problem_path.is_file():
         raise root.error("problem", problem_key, f"no problem file at {problem_path}")
     load_problem(problem_path)  # the base problem itself must be valid
+    ProblemFiles.read(problem_path)  # and its robot file's path relative to it
     planners = root.raw("planners")
     if (
         not isinstance(planners, list)
@@ -180,7 +173,10 @@ def load_sweep_spec(path: str | Path) -> SweepSpec:
 
 
 def _check_value(table: Table, key: str, value: Any, problem_path: Path) -> None:
-    """The base problem with this one value must load: unknown keys and bad values fail."""
+    """The base problem with this one value must load: unknown keys and bad values fail;
+    the robot file is not an axis (a task carries the base problem's robot file)."""
+    if key == "robot":
+        raise table.error(key, value, "the robot file cannot be swept; sweep its values, robot.KEY")
     try:
         load_problem(problem_path, {key: value})
     except InputError as error:
