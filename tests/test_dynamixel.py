@@ -29,6 +29,7 @@ from spm_opt.execution.emulator import (
     Emulator,
     Faults,
     Overload,
+    RefusedWrites,
     spawn_emulator,
 )
 from spm_opt.execution.plant import PlantSettings
@@ -127,6 +128,7 @@ def test_guard_leaves_no_ff_ff_fd_in_any_window_the_sdk_stuffs(ids, goals, previ
         ({"ids": (1, 253)}, "ids"),
         ({"retries": -1}, "retries"),
         ({"timeout_s": 0.0}, "timeout_s"),
+        ({"write_timeout_s": 0.0}, "write_timeout_s"),
     ],
 )
 def test_bad_settings_are_input_errors_naming_the_field(kwargs, field):
@@ -268,6 +270,29 @@ def test_a_retry_hides_one_lost_reply_but_counts_it(robot):
         backend.write_goal(np.zeros(2))
         backend.read()
         assert backend.describe()["communication_failures"]["read"] == 1
+
+
+def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot):
+    """A sync write gets no reply: its failure is the port's. While the line takes no byte,
+    ``write_goal`` fails after ``write_timeout_s`` (it would otherwise wait for ever), its
+    goal never arrives, and it is counted; once the line moves again, goals arrive."""
+    faults = Faults(write=RefusedWrites(at=0.0, seconds=0.4))
+    with connected(robot, faults=faults) as (emulator, backend):
+        backend.write_goal(np.zeros(2))  # starts the faults' clock
+        time.sleep(0.02)
+        start = time.perf_counter()
+        with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
+            backend.write_goal(np.full(2, 0.01))
+        assert time.perf_counter() - start < 0.2
+        with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
+            backend.read()  # its instruction cannot go out either
+        assert np.all(emulator.plant.goal_position_rad == 0.0)
+        time.sleep(0.4)
+        backend.write_goal(np.full(2, 0.01))
+        time.sleep(0.02)
+        np.testing.assert_allclose(emulator.plant.goal_position_rad, 0.01, atol=2e-5)
+        failures = backend.describe()["communication_failures"]
+        assert failures == {"connect": 0, "read": 1, "write": 1}
 
 
 def test_an_overload_shows_in_the_next_read_and_blocks_the_next_connect(robot):

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import serial
 from dynamixel_sdk import GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 from hypothesis import given
 from hypothesis import strategies as st
@@ -18,13 +19,14 @@ from spm_opt.execution.emulator import (
     Emulator,
     Faults,
     Overload,
+    RefusedWrites,
     StuckEncoder,
     main,
     parse_fault,
     parse_faults,
     spawn_emulator,
 )
-from spm_opt.execution.plant import PlantSettings
+from spm_opt.execution.plant import PlantSettings, StateTrace
 from spm_opt.execution.protocol import BROADCAST_ID, Instruction, PacketReader, build_instruction
 from spm_opt.model.params import load_robot
 
@@ -342,6 +344,49 @@ def test_delayed_replies_arrive_late(faulty):
     assert max(latencies[2:]) < 0.1
 
 
+def test_refused_writes_fail_at_the_port_then_recover(faulty, robot):
+    """For 0.3 s the line takes no byte: a sync write (which gets no reply, so only the port
+    can fail it) times out in pyserial, and its goal never reaches the plant."""
+    emulator, port, ph = faulty(Faults(write=RefusedWrites(at=0.0, seconds=0.3)))
+    port.ser.write_timeout = 0.02
+    enable_and_start(port, ph)  # starts the faults' clock
+    time.sleep(0.02)
+    writer = GroupSyncWrite(port, ph, GOAL_POSITION, 4)
+    for device_id in (1, 2):
+        writer.addParam(device_id, word(1000))
+    with pytest.raises(serial.SerialTimeoutException):
+        writer.txPacket()
+    port.is_using = False  # the SDK leaves its port busy when pyserial raises
+    time.sleep(0.02)
+    assert np.all(emulator.plant.goal_position_rad == 0.0)
+    time.sleep(0.3)
+    sync_write(port, ph, (1000, 1000))
+    time.sleep(0.02)
+    held = robot.actuator.pulses(emulator.plant.goal_position_rad)
+    np.testing.assert_array_equal(held, [1000, 1000])
+
+
+def test_the_emulator_records_the_plants_true_state(robot):
+    trace = StateTrace()
+    with Emulator(robot, plant_settings=COARSE, trace=trace) as emulator:
+        port, ph = connect(emulator.device)
+        begin = time.monotonic()
+        enable_and_start(port, ph, (2000, -1000))
+        time.sleep(0.6)
+        _, positions = sync_read_positions(port, ph)
+        end = time.monotonic()
+        port.closePort()
+    recorded = trace.arrays()
+    assert begin <= recorded["time_s"][0] and recorded["time_s"][-1] <= end + 0.1
+    assert np.all(np.diff(recorded["time_s"]) > 0)
+    pulses = robot.actuator.pulses(recorded["position_rad"][-1])
+    np.testing.assert_allclose(pulses, positions, atol=1)  # the plant at rest: same pulse
+    np.testing.assert_allclose(
+        robot.actuator.pulses(recorded["goal_rad"][-1]), [2000, -1000], atol=0
+    )
+    assert np.max(np.abs(recorded["velocity_rad_s"][-1])) < 1e-3
+
+
 def test_faults_must_name_emulated_ids(robot):
     with pytest.raises(InputError, match="id 5"):
         Emulator(robot, faults=Faults(overload=(Overload(id=5),)))
@@ -355,6 +400,7 @@ def test_parse_fault_examples():
     assert parse_fault("crc:at=1.0,count=3") == CorruptReplies(at=1.0, count=3)
     assert parse_fault(" delay: at=1.0, seconds=0.05, count=5") == DelayReplies(0.05, 1.0, 5)
     assert parse_fault("stuck:id=2,at=1.5") == StuckEncoder(id=2, at=1.5)
+    assert parse_fault("write:at=1,seconds=0.5") == RefusedWrites(seconds=0.5, at=1.0)
     faults = parse_faults(["drop:at=2", "stuck:id=2,at=1.5", "overload:id=1,at=3"])
     assert faults == Faults(
         drop=DropReplies(at=2.0),
@@ -375,6 +421,8 @@ def test_parse_fault_examples():
         ("crc:count=1.5", "count must be an integer"),
         ("delay:at=1", "'seconds' is required"),
         ("delay:seconds=0", "seconds must be > 0"),
+        ("write:at=1", "'seconds' is required"),
+        ("write:seconds=inf", "seconds must be > 0"),
         ("overload:at=1", "'id' is required"),
         ("stuck:id=300", "id must be an integer 0-252"),
         ("drop:at=1,at=2", "given twice"),
@@ -396,6 +444,7 @@ faults = st.one_of(
     st.builds(DropReplies, times, counts),
     st.builds(CorruptReplies, times, counts),
     st.builds(DelayReplies, st.floats(1e-6, 10.0), times, counts),
+    st.builds(RefusedWrites, st.floats(1e-6, 10.0), times),
     st.builds(Overload, st.integers(0, 252), times),
     st.builds(StuckEncoder, st.integers(0, 252), times),
 )
@@ -413,9 +462,10 @@ def test_module_entry_point_rejects_bad_input(capsys):
     assert main(["--fault", "drop:at=x"]) == 2
 
 
-def test_spawned_emulator_serves_the_sdk():
+def test_spawned_emulator_serves_the_sdk(tmp_path):
     faults = Faults(overload=(Overload(id=2, at=0.3),))
-    with spawn_emulator(start_deg=(10.0, -5.0), faults=faults) as child:
+    trace_path = tmp_path / "plant.npz"
+    with spawn_emulator(start_deg=(10.0, -5.0), faults=faults, trace_path=trace_path) as child:
         port, ph = connect(child.device)
         assert ph.ping(port, 1) == (38152, COMM_SUCCESS, 0)
         assert ph.ping(port, 2) == (38152, COMM_SUCCESS, 0)
@@ -434,3 +484,9 @@ def test_spawned_emulator_serves_the_sdk():
         port.closePort()
         process = child.process
     assert process.returncode == 0
+    # the child saved the plant's true state when it ended: the goal, and θ2 stopped by the
+    # overload (torque off: held by its gear)
+    trace = StateTrace.load(trace_path)
+    assert trace["time_s"][-1] - trace["time_s"][0] >= 0.35
+    np.testing.assert_allclose(trace["goal_rad"][-1, 0], goal[0] * 2 * np.pi / 361_384)
+    assert trace["velocity_rad_s"][-1, 1] == 0.0

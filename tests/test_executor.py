@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from conftest import HARDWARE_PROBLEM
+from test_execution_faults import assert_the_commanded_stop_kept_its_limits, stop_bound
 
 import spm_opt as so
 from spm_opt.errors import PreflightError
@@ -93,13 +94,11 @@ def test_a_robot_away_from_the_start_is_refused_or_approached(
     assert np.max(speed) <= 0.1 + 1e-6  # the approach's speed limit, rad/s
 
 
-def _stop_is_jerk_limited(table: pd.DataFrame, problem: so.Problem) -> None:
-    goals = table[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
-    stop = table["phase"].to_numpy() == "stop"
-    first = int(np.argmax(stop))
-    window = goals[first - 3 : first + int(stop.sum())]
-    acceleration = np.diff(window, 2, axis=0) * 100.0**2
-    assert np.max(np.abs(acceleration)) <= 1.0 + 0.05  # rad/s², the stop's limit
+def _stop_is_jerk_limited(table: pd.DataFrame, problem: so.Problem, plan: so.Trajectory) -> None:
+    """The stop's goals keep its speed, acceleration and jerk limits (see
+    tests/test_execution_faults.py for the bound and the tolerance)."""
+    assert_the_commanded_stop_kept_its_limits(table, problem, stop_bound(problem, plan))
+    first = int(np.argmax(table["phase"].to_numpy() == "stop"))
     assert np.all(table["phase"].iloc[first:].isin(["stop", "hold"]))
 
 
@@ -113,7 +112,7 @@ def test_a_following_error_ends_in_a_jerk_limited_stop_at_rest(
     assert result.reason.startswith("following error of theta")
     table, header = read_log(tmp_path / "run.csv")
     assert header["reason"] == result.reason and header["at_rest"]
-    _stop_is_jerk_limited(table, hardware_problem)
+    _stop_is_jerk_limited(table, hardware_problem, hardware_plan)
     last = table.iloc[-1]
     assert abs(last["velocity_theta1_rad_s"]) < 0.005 and abs(last["velocity_theta2_rad_s"]) < 0.005
 
@@ -132,7 +131,7 @@ def test_sigint_ends_in_a_safe_stop(hardware_problem, hardware_plan, tmp_path):
     table, _ = read_log(tmp_path / "run.csv")
     plan_times = table.loc[table["phase"] == "plan", "time_s"]
     assert 1.0 < plan_times.max() - plan_times.min() < 0.5 * hardware_plan.duration
-    _stop_is_jerk_limited(table, hardware_problem)
+    _stop_is_jerk_limited(table, hardware_problem, hardware_plan)
 
 
 def test_kill_9_leaves_a_valid_log_of_every_flushed_sample(hardware_plan, tmp_path):

@@ -1,4 +1,5 @@
-"""The simulated plant: the model's terms, the exact friction step, the position loop."""
+"""The simulated plant: the model's terms, the exact friction step, the position loop, and
+its true state (for tests) beside what its sensors report."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
-from spm_opt.execution.plant import DynamixelPlant, _minimise
+from spm_opt.execution.plant import DynamixelPlant, StateTrace, _minimise
 from spm_opt.model import dynamics
 
 angles = st.floats(-0.8, 0.8)
@@ -111,3 +112,26 @@ def test_a_stuck_encoder_freezes_the_reported_position_only(paper_problem):
     plant.advance_to(0.5)
     assert plant.present_position_pulses()[1] == frozen[1]
     assert plant.position_rad[1] == pytest.approx(0.05, abs=1e-3)
+
+
+def test_the_true_state_is_exact_where_the_sensors_quantise(paper_problem, tmp_path):
+    plant = DynamixelPlant(paper_problem.robot, start_rad=np.array([0.1, -0.2]))
+    plant.enable_torque(0, True)
+    plant.goal_position_rad[0] = 0.15
+    trace = StateTrace()
+    for k in range(1, 11):
+        plant.advance_to(0.005 * k)
+        trace.record(0.005 * k, plant)
+    state = plant.true_state(0.05)
+    pulses = plant.present_position_pulses()
+    angle = paper_problem.robot.actuator.angle(pulses)
+    assert 0 < abs(state.position_rad[0] - angle[0]) < np.pi / 361_384  # under half a pulse
+    assert state.velocity_rad_s[0] > 0 and state.velocity_rad_s[1] == 0.0
+    state.position_rad[0] = 99.0  # a copy: the plant is untouched
+    assert plant.position_rad[0] < 1.0
+    trace.save(tmp_path / "trace.npz")
+    loaded = StateTrace.load(tmp_path / "trace.npz")
+    assert len(trace) == 10 and loaded["position_rad"].shape == (10, 2)
+    np.testing.assert_array_equal(loaded["time_s"], 0.005 * np.arange(1, 11))
+    assert loaded["position_rad"][-1, 0] == plant.position_rad[0]
+    np.testing.assert_array_equal(loaded["goal_rad"][-1], plant.goal_position_rad)

@@ -112,7 +112,9 @@ class Backend(Protocol):
     ``read`` returns both actuators' state; ``write_goal`` sends both goal positions;
     ``close`` releases the device and leaves the actuators holding their last goal.
     ``read`` and ``write_goal`` raise :class:`CommunicationError` when a transaction
-    fails. ``describe`` is plain data for the log's header (device, settings, counters).
+    fails; the executor takes a goal whose write raised as never delivered, and counts a
+    failed write against the same retry budget as a failed read. ``describe`` is plain
+    data for the log's header (device, settings, counters).
     """
 
     clock: Clock

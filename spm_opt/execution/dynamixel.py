@@ -11,9 +11,24 @@ Facts from ``shared/reference/dynamixel-l54.md``. One control cycle is two trans
   an overload shows in the very next ``read``.
 - ``write_goal``: one ``GroupSyncWrite`` of 4 bytes at 596, which gets no reply.
 
+What a failed write is. A broadcast sync write gets no status packet, so the bus cannot
+say that one was lost or refused: the SDK's ``txPacket`` returns ``COMM_SUCCESS`` once the
+port (pyserial, then the kernel's tty buffer) has taken the bytes. A write therefore fails,
+honestly, only at the port: the SDK reports a result other than success (port busy, a
+short write), or pyserial raises (the device is gone: EIO; or the port took no bytes
+within :data:`WRITE_TIMEOUT_S`: a stalled adapter, flow control holding the line). Each
+is a :class:`CommunicationError` and is counted. A goal lost on the wire after the port took
+it is not seen here; the next reads (position, following error) are what show it. The
+converse also happens: pyserial, after writing, waits for room for more, so a line that
+stalls just after a packet left fails a write whose goal arrived. On a real USB adapter
+the kernel buffers some kilobytes, so a stall of the adapter shows as a write failure
+only once that buffer is full; the read's missing replies show it at once.
+
 The SDK opens its port with timeout 0 and polls it in a busy loop, which takes a CPU core
 (and the GIL) from everything else while it waits; the backend gives the port a 1 ms read
-timeout instead, so that the SDK's reads block until the bytes they ask for arrive.
+timeout instead, so that the SDK's reads block until the bytes they ask for arrive. Its
+writes get a write timeout (pyserial's default waits for ever, which would stall the
+control loop on a stalled port).
 
 The SDK 4.1.0 discards the result of its own byte stuffing, so a packet whose instruction
 or parameters contain ``FF FF FD`` would go out unstuffed. :func:`stuffing_safe_goals`
@@ -88,6 +103,13 @@ OPERATING_MODES = {0: "torque", 1: "velocity", 3: "position", 4: "extended posit
 READ_BLOCK_S = 0.001
 """Longest a read of the port blocks for bytes that do not come, s (the SDK asks for no
 more bytes than the packet it is reading has left, so a read normally returns at once)."""
+
+WRITE_TIMEOUT_S = 0.02
+"""Longest a write waits for the port to take its bytes, s, before it fails. A healthy
+port takes a packet at once (into the kernel's buffer), but pyserial also fails a write
+whose bytes went out when the process was descheduled for longer than this between its
+start and its check; on 2 cores under 3 busy processes, 5 ms failed 17 of 3000 writes that
+went out, 20 ms none. Like the SDK's 34 ms reply timeout, it bounds a cycle on a dead line."""
 
 INST_SYNC_WRITE = 0x83
 BROADCAST_ID = 0xFE
@@ -172,6 +194,8 @@ class DynamixelRobot:
     timeout_s : float or None, s
         Time allowed for both replies of a ``read``; None keeps the SDK's estimate (the
         bytes' time + 34 ms, written for a 16 ms USB latency timer).
+    write_timeout_s : float, s
+        Time allowed for the port to take a packet (see :data:`WRITE_TIMEOUT_S`).
 
     Attributes
     ----------
@@ -191,6 +215,7 @@ class DynamixelRobot:
         ids: tuple[int, int] = (1, 2),
         retries: int = 0,
         timeout_s: float | None = None,
+        write_timeout_s: float = WRITE_TIMEOUT_S,
     ) -> None:
         if actuator.model not in MODEL_NUMBERS:
             raise InputError(
@@ -212,12 +237,17 @@ class DynamixelRobot:
             raise InputError(f"retries: {retries!r}; expected an integer ≥ 0")
         if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0.0):
             raise InputError(f"timeout_s: {timeout_s!r}; expected a positive number of seconds")
+        if not (isinstance(write_timeout_s, int | float) and 0.0 < write_timeout_s <= 1.0):
+            raise InputError(
+                f"write_timeout_s: {write_timeout_s!r}; expected a number of seconds in (0, 1]"
+            )
         self.actuator = actuator
         self.port = port
         self.baud = baud
         self.ids = (int(ids[0]), int(ids[1]))
         self.retries = retries
         self.timeout_s = timeout_s
+        self.write_timeout_s = float(write_timeout_s)
         self.clock = MonotonicClock()
         self.nudge_count = 0
         half_turn = actuator.pulses_per_rev // 2
@@ -340,7 +370,9 @@ class DynamixelRobot:
         InputError
             A goal that is not finite or is beyond the position limits.
         CommunicationError
-            The packet could not be written to the port.
+            The port did not take the packet: an SDK result other than success, a port
+            error, or no room within ``write_timeout_s`` (see the module's docstring: a
+            sync write gets no reply, so a packet the port took counts as sent).
         """
         position = np.asarray(position_rad, dtype=float)
         if position.shape != (2,) or not np.all(np.isfinite(position)):
@@ -371,6 +403,7 @@ class DynamixelRobot:
             "firmware_versions": list(self.firmware_versions),
             "retries": self.retries,
             "timeout_s": self.timeout_s,
+            "write_timeout_s": self.write_timeout_s,
             "nudge_count": self.nudge_count,
             "communication_failures": dict(self.failures),
         }
@@ -399,6 +432,7 @@ class DynamixelRobot:
         # the SDK polls a port opened with timeout 0 in a busy loop; a short blocking read
         # waits for the bytes it asks for without spinning (and without holding the GIL)
         port.ser.timeout = READ_BLOCK_S
+        port.ser.write_timeout = self.write_timeout_s
         self._sdk, self._port = sdk, port
         self._packets = sdk.PacketHandler(2.0)
         self._sync_read = sdk.GroupSyncRead(port, self._packets, ADDR_PRESENT_POSITION, READ_LENGTH)

@@ -38,6 +38,16 @@ Faults (:class:`Faults`) are timed from the first goal-position write (a write o
 write covering address 596) made while torque is on, so that a run is deterministic
 relative to its own start. Their text form, ``kind:field=value,...``, is read by
 :func:`parse_fault`.
+
+A sync write gets no reply, so nothing on the bus can tell the host that one was lost:
+the SDK's ``txPacket`` reports success once the port has taken the bytes. The write fault
+(:class:`RefusedWrites`) therefore acts where a real failure shows: the emulator suspends
+the pseudo-terminal's output (``tcflow(TCOOFF)``, as a stalled adapter or a deasserted
+CTS line would), so the port takes no byte from the host and the host's writes, of goals
+and of read instructions alike, time out at the port.
+
+For tests, the emulator can record the plant's true state (:class:`StateTrace`) on the
+machine's monotonic clock, which is the executor's clock too.
 """
 
 from __future__ import annotations
@@ -52,6 +62,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import termios
 import threading
 import time
 import tty
@@ -63,7 +74,7 @@ from pathlib import Path
 import numpy as np
 
 from spm_opt.errors import InputError
-from spm_opt.execution.plant import OVERLOAD_BIT, DynamixelPlant, PlantSettings
+from spm_opt.execution.plant import OVERLOAD_BIT, DynamixelPlant, PlantSettings, StateTrace
 from spm_opt.execution.protocol import (
     ALERT,
     BROADCAST_ID,
@@ -389,16 +400,39 @@ class StuckEncoder:
         return _spec("stuck", id=self.id, at=self.at)
 
 
-Fault = DropReplies | CorruptReplies | DelayReplies | Overload | StuckEncoder
+@dataclass(frozen=True)
+class RefusedWrites:
+    """From ``at`` s, for ``seconds``, the line takes no byte from the host: every packet it
+    sends (a sync write of goals, the instruction of a read) fails at its port.
+
+    The pseudo-terminal's output is suspended (``tcflow(TCOOFF)``) as a stalled adapter's
+    would be; a host write waits for room and fails when its write timeout expires.
+    """
+
+    seconds: float
+    at: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_time("write", "at", self.at)
+        if not (math.isfinite(self.seconds) and self.seconds > 0.0):
+            raise InputError(f"fault write: seconds must be > 0, got {self.seconds!r}")
+
+    def spec(self) -> str:
+        """The text form read by :func:`parse_fault`."""
+        return _spec("write", at=self.at, seconds=self.seconds)
+
+
+Fault = DropReplies | CorruptReplies | DelayReplies | RefusedWrites | Overload | StuckEncoder
 
 _KINDS: dict[str, type] = {
     "drop": DropReplies,
     "crc": CorruptReplies,
     "delay": DelayReplies,
+    "write": RefusedWrites,
     "overload": Overload,
     "stuck": StuckEncoder,
 }
-_REQUIRED = {"delay": ("seconds",), "overload": ("id",), "stuck": ("id",)}
+_REQUIRED = {"delay": ("seconds",), "write": ("seconds",), "overload": ("id",), "stuck": ("id",)}
 
 
 @dataclass(frozen=True)
@@ -413,12 +447,13 @@ class Faults:
     drop: DropReplies | None = None
     crc: CorruptReplies | None = None
     delay: DelayReplies | None = None
+    write: RefusedWrites | None = None
     overload: tuple[Overload, ...] = ()
     stuck: tuple[StuckEncoder, ...] = ()
 
     def specs(self) -> list[str]:
         """The faults in the text form read by :func:`parse_faults`."""
-        single = [f for f in (self.drop, self.crc, self.delay) if f is not None]
+        single = [f for f in (self.drop, self.crc, self.delay, self.write) if f is not None]
         return [fault.spec() for fault in (*single, *self.overload, *self.stuck)]
 
     def ids(self) -> set[int]:
@@ -440,7 +475,8 @@ def parse_fault(text: str) -> Fault:
     Kinds and fields (times in s from the first goal-position write with torque on;
     ``count`` omitted means every later reply):
     ``drop:at=T[,count=N]``, ``crc:at=T[,count=N]``, ``delay:at=T,seconds=S[,count=N]``,
-    ``overload:id=I,at=T``, ``stuck:id=I,at=T``. ``at`` defaults to 0.
+    ``write:at=T,seconds=S``, ``overload:id=I,at=T``, ``stuck:id=I,at=T``. ``at`` defaults
+    to 0.
 
     Raises
     ------
@@ -477,7 +513,7 @@ def parse_faults(texts: Iterable[str]) -> Faults:
     Raises
     ------
     InputError
-        A text is invalid, or drop, crc or delay is given more than once.
+        A text is invalid, or drop, crc, delay or write is given more than once.
     """
     single: dict[str, Fault] = {}
     overload: list[Overload] = []
@@ -497,6 +533,7 @@ def parse_faults(texts: Iterable[str]) -> Faults:
         drop=single.get("drop"),
         crc=single.get("crc"),
         delay=single.get("delay"),
+        write=single.get("write"),
         overload=tuple(overload),
         stuck=tuple(stuck),
     )
@@ -519,6 +556,25 @@ class _Window:
 
 def _window(fault: DropReplies | CorruptReplies | DelayReplies | None) -> _Window | None:
     return None if fault is None else _Window(fault.at, fault.count)
+
+
+class _Stall:
+    """The write fault's state: the line's output suspended in [at, at + seconds)."""
+
+    def __init__(self, fault: RefusedWrites, line: int) -> None:
+        self.fault, self.line = fault, line
+        self.suspended = False
+        self.over = False
+
+    def update(self, t: float) -> None:
+        """Suspend or resume the line for the time ``t`` (s) since the fault origin."""
+        if self.over or t < self.fault.at:
+            return
+        inside = t < self.fault.at + self.fault.seconds
+        if inside != self.suspended:
+            termios.tcflow(self.line, termios.TCOOFF if inside else termios.TCOON)
+            self.suspended = inside
+        self.over = not inside
 
 
 # ---------------------------------------------------------------------------- emulator
@@ -550,6 +606,9 @@ class Emulator:
     plant_settings : PlantSettings, optional
     firmware : int
         Firmware version reported by ping and at address 6.
+    trace : StateTrace, optional
+        Receives the plant's true state each time the plant is advanced, on the
+        machine's monotonic clock (``time.monotonic``, s).
 
     The pseudo-terminal is opened on construction (``device`` is its path) and closed by
     :meth:`close`. As a context manager it serves in a background daemon thread;
@@ -573,6 +632,7 @@ class Emulator:
         faults: Faults | None = None,
         plant_settings: PlantSettings | None = None,
         firmware: int = FIRMWARE_VERSION,
+        trace: StateTrace | None = None,
     ) -> None:
         ids = tuple(ids)
         if not _valid_ids(ids):
@@ -593,6 +653,7 @@ class Emulator:
         self._crc = _window(self.faults.crc)
         self._delay = _window(self.faults.delay)
         self._events = [*self.faults.overload, *self.faults.stuck]
+        self.trace = trace
         self._start: float | None = None
         self._now = 0.0
         self.lost_time_s = 0.0
@@ -605,6 +666,7 @@ class Emulator:
         tty.setraw(self._slave)
         os.set_blocking(self._master, False)
         self.device: str = os.ttyname(self._slave)
+        self._stall = None if self.faults.write is None else _Stall(self.faults.write, self._slave)
 
     # ------------------------------------------------------------------ lifecycle
     def __enter__(self) -> Emulator:
@@ -710,6 +772,10 @@ class Emulator:
             self._start += lag - MAX_LAG_S
             self.lost_time_s += lag - MAX_LAG_S
         self.plant.advance_to(now - self._start)
+        if self.trace is not None:
+            self.trace.record(now, self.plant)
+        if self._stall is not None and self._fault_origin is not None:
+            self._stall.update(now - self._fault_origin)
         if self._events and self._fault_origin is not None:
             t = now - self._fault_origin
             for event in [e for e in self._events if t >= e.at]:
@@ -884,6 +950,7 @@ def serve(
     faults: Faults,
     seed: int,
     announce: Callable[[str], None],
+    trace_path: str | Path | None = None,
 ) -> None:
     """Serve in the calling (main) thread until SIGINT or SIGTERM.
 
@@ -895,6 +962,9 @@ def serve(
         Seed of the plant's sensor noise.
     announce : callable
         Called once with the device path, before serving.
+    trace_path : path, optional
+        Where to save the plant's true state (:class:`StateTrace`, ``.npz``) when serving
+        ends.
     """
     stop = threading.Event()
 
@@ -903,12 +973,15 @@ def serve(
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        emulator = Emulator(robot, ids, start_rad, faults, PlantSettings(seed=seed))
+        trace = None if trace_path is None else StateTrace()
+        emulator = Emulator(robot, ids, start_rad, faults, PlantSettings(seed=seed), trace=trace)
         try:
             announce(emulator.device)
             emulator.serve_forever(stop)
         finally:
             emulator.close()
+            if trace is not None:
+                trace.save(trace_path)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
@@ -959,13 +1032,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--start-deg", default="0,0", help="joint angles at start, deg")
     parser.add_argument("--fault", action="append", default=[], help="fault to inject (repeatable)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    parser.add_argument("--trace", help="save the plant's true state here (.npz) at exit")
     args = parser.parse_args(argv)
     try:
         faults = parse_faults(args.fault)
         ids = parse_ids(args.ids)
         start = parse_angles_deg(args.start_deg)
         robot = _load_robot(args.robot, args.problem)
-        serve(robot, ids, start, faults, args.seed, lambda device: print(device, flush=True))
+        serve(
+            robot,
+            ids,
+            start,
+            faults,
+            args.seed,
+            lambda device: print(device, flush=True),
+            trace_path=args.trace,
+        )
     except InputError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
@@ -989,6 +1071,7 @@ def spawn_emulator(
     start_deg: Sequence[float] = (0.0, 0.0),
     faults: Faults | None = None,
     seed: int = 0,
+    trace_path: str | Path | None = None,
     startup_timeout_s: float = 30.0,
 ) -> Iterator[SpawnedEmulator]:
     """Run the emulator in a child process (out of this process's GIL) while in the block.
@@ -999,6 +1082,9 @@ def spawn_emulator(
         Robot TOML, or a problem TOML whose robot is used (default: the prototype).
     ids, start_deg, faults, seed
         As for :class:`Emulator`; ``start_deg`` in degrees.
+    trace_path : path, optional
+        Where the child saves the plant's true state when it ends (read it after the
+        block with :meth:`StateTrace.load`).
     startup_timeout_s : float, s
         How long to wait for the child to announce its device.
 
@@ -1021,6 +1107,8 @@ def spawn_emulator(
     command += ["--start-deg", ",".join(repr(float(a)) for a in start_deg), "--seed", str(seed)]
     for spec in (faults or Faults()).specs():
         command += ["--fault", spec]
+    if trace_path is not None:
+        command += ["--trace", str(trace_path)]
     with tempfile.TemporaryFile() as errors:
         process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=errors)
         try:

@@ -1,16 +1,21 @@
 """The one executor: every plan reaches a device through here.
 
-Pre-flight, the evaluator measures the plan against the problem's limits and the robot's
-(joint range, speed, acceleration, jerk, torque, singularity; the cut's own figures, tool
-speed and distance from the contour, are the planner's business, not the robot's
-safety), and the robot must be where the plan starts, or, on request, is first brought
-there by a jerk-limited ruckig approach. Then a fixed-rate loop on the backend's clock
-reads both actuators, checks them, writes the next goal positions and logs the sample.
-On a hardware error, a following error beyond the tolerance, a run of failed reads longer
-than the retry budget, SIGINT or SIGTERM, the robot is brought to rest by a jerk-limited
-ruckig stop that starts from the last commanded state (so the goal stream stays
-continuous: starting from the measured position would make the goal jump back by the
-following error) and holds there.
+Pre-flight, the evaluator measures the plan against the problem's limits and the robot's,
+and every limit that :mod:`spm_opt.limits` says judges the robot (joint range, speed,
+acceleration, jerk, torque, current, singularity) must hold; the cut's own figures (tool
+speed, distance from the contour, landmark visits, coverage) are the planner's business,
+not the robot's safety. The robot must be where the plan starts, or, on request, is first
+brought there by a jerk-limited ruckig approach. Then a fixed-rate loop on the backend's
+clock reads both actuators, checks them, writes the next goal positions and logs the
+sample.
+On a hardware error, a following error beyond the tolerance, a run of cycles with a
+failed read or write longer than the retry budget, SIGINT or SIGTERM, the robot is brought
+to rest by a jerk-limited ruckig stop that starts, in the cycle that saw the fault, from
+the last goal the actuators received (so the goal stream stays continuous: starting from
+the measured position would make the goal jump back by the following error, and a goal
+whose write failed never reached them). It then holds there until rest is proven: every
+sample over a window below the rest speed and each joint's position within a few encoder
+pulses. The log's header reports how long the stop took and how far each joint moved.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import math
 import signal
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -39,6 +45,8 @@ from spm_opt.execution.backend import (
     hardware_error_names,
 )
 from spm_opt.execution.log import LogWriter
+from spm_opt.limits import ROBOT, RULES
+from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import DEG
 from spm_opt.planners.ruckig import calculate_locally
 from spm_opt.problem import Problem
@@ -46,8 +54,8 @@ from spm_opt.trajectory import Trajectory, package_version
 
 _LOG = logging.getLogger(__name__)
 
-CUT_QUALITY_LIMITS = ("tool speed", "contour deviation")
-"""Evaluator limits that judge the cut, not the robot's safety: not checked pre-flight."""
+_CLOCK_EPSILON_S = 1e-9
+"""Rounding of the loop's clock, s: a time this close to a boundary counts as on it."""
 
 
 @dataclass(frozen=True)
@@ -67,15 +75,23 @@ class ExecutionSettings:
     following_error_rad : float, rad
         Largest distance between the planned and the measured position of a joint.
     communication_retries : int
-        Consecutive failed reads tolerated before the run stops.
+        Consecutive control cycles with a failed read or a failed write tolerated before
+        the run stops.
     stop_acceleration_rad_s2, stop_jerk_rad_s3 : float
         Limits of the stop and of the approach (defaults when the problem has none).
     settle_s : float, s
-        After the plan's end, time allowed for the joints to come to rest.
+        After the plan's end, longest time allowed for the joints to come to rest.
     rest_speed_rad_s : float, rad/s
-        Measured joint speed below which a joint counts as at rest.
+        Measured joint speed below which a sample counts as at rest.
+    rest_window_s : float, s
+        Rest is confirmed by samples covering this long, every one slower than
+        ``rest_speed_rad_s``, over which each joint's measured position spans fewer than
+        ``rest_position_pulses`` encoder pulses.
+    rest_position_pulses : int
+        See ``rest_window_s`` (pulses of the actuator's encoder: 5 of the L54's 361,384
+        per revolution are 0.005°).
     hold_s : float, s
-        After a stop, time spent holding and confirming rest.
+        After a stop, longest time spent holding to confirm rest.
     flush_interval_s : float, s
         Longest time a sample waits before it is written to the log.
     """
@@ -90,7 +106,9 @@ class ExecutionSettings:
     stop_jerk_rad_s3: float = 10.0
     settle_s: float = 1.0
     rest_speed_rad_s: float = 0.005
-    hold_s: float = 0.5
+    rest_window_s: float = 0.2
+    rest_position_pulses: int = 5
+    hold_s: float = 1.0
     flush_interval_s: float = 0.1
 
     def __post_init__(self) -> None:
@@ -104,6 +122,8 @@ class ExecutionSettings:
             "stop_jerk_rad_s3": (1e-3, 10000.0),
             "settle_s": (0.0, 60.0),
             "rest_speed_rad_s": (1e-6, 1.0),
+            "rest_window_s": (0.0, 10.0),
+            "rest_position_pulses": (1, 100_000),
             "hold_s": (0.0, 60.0),
             "flush_interval_s": (1e-3, 0.1),
         }
@@ -111,6 +131,15 @@ class ExecutionSettings:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and low <= value <= high):
                 raise InputError(f"{name} = {value!r}: expected a number in [{low}, {high}]")
+        for name in ("communication_retries", "rest_position_pulses"):
+            if not isinstance(getattr(self, name), int):
+                raise InputError(f"{name} = {getattr(self, name)!r}: expected an integer")
+        for name in ("settle_s", "hold_s"):
+            if getattr(self, name) < self.rest_window_s:
+                raise InputError(
+                    f"{name} = {getattr(self, name)!r}: expected at least rest_window_s "
+                    f"({self.rest_window_s!r} s), or rest could never be confirmed"
+                )
 
 
 @dataclass(frozen=True)
@@ -141,10 +170,48 @@ class LoopStatistics:
         )
 
 
+@dataclass(frozen=True)
+class StopReport:
+    """How a safe stop went (SI; times on the backend's clock, the log's ``time_s``).
+
+    Attributes
+    ----------
+    fault_seen_s : float, s
+        When the fault was seen: the start of the cycle that saw it.
+    stop_delivered : bool
+        Every goal of the stop reached the actuators.
+    at_rest : bool
+        Rest confirmed over the rest window (see :class:`ExecutionSettings`).
+    rest : str
+        "confirmed", or "not confirmed within the … s hold: " and why.
+    duration_s : float or None, s
+        From the fault seen to rest confirmed (None when it was not).
+    travel_rad, travel_deg : list of float, or None
+        How far each joint moved after the fault was seen, as measured: from the last
+        reading at or before it to the last reading of the hold (None without both).
+    failed_reads, failed_writes : int
+        Transactions that failed during the stop and the hold.
+    hardware_errors : list of str
+        Hardware errors the actuators reported during the stop and the hold.
+    """
+
+    fault_seen_s: float
+    stop_delivered: bool
+    at_rest: bool
+    rest: str
+    duration_s: float | None
+    travel_rad: list[float] | None
+    travel_deg: list[float] | None
+    failed_reads: int
+    failed_writes: int
+    hardware_errors: list[str]
+
+
 @dataclass
 class ExecutionResult:
     """How a run ended. ``completed`` is False when it ended in a safe stop; ``reason``
-    says why, in one line."""
+    says why, in one line; ``stop`` says how the stop went; ``signals`` lists every SIGINT
+    and SIGTERM received, with the phase it arrived in."""
 
     completed: bool
     reason: str
@@ -153,6 +220,8 @@ class ExecutionResult:
     statistics: LoopStatistics
     at_rest: bool
     backend: dict[str, Any] = field(default_factory=dict)
+    stop: StopReport | None = None
+    signals: list[str] = field(default_factory=list)
 
 
 class _Ticker:
@@ -174,13 +243,37 @@ class _Ticker:
         return now
 
 
+@dataclass
+class _Cycle:
+    """One control cycle: when it began (s, the time its goal is sampled at), what it
+    read and what went wrong (``notes``)."""
+
+    time_s: float
+    measurement: Measurement | None = None
+    read_failed: bool = False
+    write_failed: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        """The log's status: "ok", or the notes."""
+        return "; ".join(self.notes) or "ok"
+
+
 class _Stop(Exception):
-    """Raised inside the loop to end the run in a safe stop."""
+    """Raised inside the loop to end the run in a safe stop. ``cycle`` saw the fault;
+    ``logged``: it is finished (its goal sent, its sample logged), else the stop's first
+    goal goes out in it."""
+
+    def __init__(self, reason: str, cycle: _Cycle | None = None, logged: bool = False) -> None:
+        super().__init__(reason)
+        self.cycle, self.logged = cycle, logged
 
 
 @dataclass
 class _Commanded:
-    """The last goal sent: position, rate, acceleration (the stop starts from here)."""
+    """The last goal the actuators received: position, rate, acceleration (the stop
+    starts from here)."""
 
     position: np.ndarray
     velocity: np.ndarray
@@ -194,6 +287,50 @@ class _Segment:
 
     duration: float
     at: Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+class _RestWindow:
+    """Proof of rest: consecutive samples covering ``window_s``, every one slower than
+    ``speed`` (rad/s), over which each joint's position spans fewer than ``pulses``."""
+
+    def __init__(self, settings: ExecutionSettings, actuator: Actuator) -> None:
+        self._speed = settings.rest_speed_rad_s
+        self._window = settings.rest_window_s
+        self._pulses = settings.rest_position_pulses
+        self._actuator = actuator
+        self._samples: deque[tuple[float, np.ndarray]] = deque()
+        self._why = "no reading"
+
+    def add(self, time_s: float, measurement: Measurement | None) -> bool:
+        """One sample at ``time_s`` (s); True once rest is confirmed."""
+        if measurement is None:
+            return self._restart("a read failed")
+        speed = np.abs(measurement.velocity_rad_s)
+        if np.any(speed >= self._speed):
+            j = int(np.argmax(speed))
+            return self._restart(f"theta{j + 1} at {speed[j]:.4f} rad/s")
+        self._samples.append((time_s, self._actuator.pulses(measurement.position_rad)))
+        while (span := self._span()).max() >= self._pulses:
+            j = int(np.argmax(span))
+            self._why = f"theta{j + 1} moved {span[j]} pulses in {self._covered():.3f} s"
+            self._samples.popleft()
+        return self._covered() >= self._window - _CLOCK_EPSILON_S
+
+    def why(self) -> str:
+        """Why rest is not confirmed (yet), in a few words."""
+        return f"{self._why}; at rest for the last {self._covered():.3f} s of {self._window:g} s"
+
+    def _restart(self, why: str) -> bool:
+        self._samples.clear()
+        self._why = why
+        return False
+
+    def _span(self) -> np.ndarray:
+        pulses = np.array([p for _, p in self._samples])
+        return pulses.max(axis=0) - pulses.min(axis=0)
+
+    def _covered(self) -> float:
+        return self._samples[-1][0] - self._samples[0][0] if self._samples else 0.0
 
 
 class Executor:
@@ -215,12 +352,14 @@ class Executor:
         self.settings = settings or ExecutionSettings()
         self._torque_map = problem.robot.actuator.current_map
         self._stop_requested: str | None = None
+        self._signals_seen: list[str] = []
+        self._phase = "connect"
 
     # ---------------------------------------------------------------- pre-flight
     def check_plan(self, trajectory: Trajectory) -> None:
         """Refuse a plan that breaks a robot limit (one-line :class:`PreflightError`)."""
         report = evaluate(self.problem, trajectory)
-        broken = [v for v in report.violations if v.limit not in CUT_QUALITY_LIMITS]
+        broken = [v for v in report.violations if RULES[v.rule].judges == ROBOT]
         if broken:
             raise PreflightError(
                 f"plan refused: {broken[0]}"
@@ -280,7 +419,7 @@ class Executor:
         header: dict[str, Any],
     ) -> ExecutionResult:
         settings = self.settings
-        writer = LogWriter(
+        self._writer = LogWriter(
             log_path,
             {
                 **header,
@@ -294,161 +433,270 @@ class Executor:
             },
             settings.flush_interval_s,
         )
-        ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
-        commanded = _Commanded(first.position_rad.copy(), np.zeros(2), np.zeros(2))
-        reason, completed, at_rest = "", False, False
+        self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
+        self._commanded = _Commanded(first.position_rad.copy(), np.zeros(2), np.zeros(2))
+        self._last_measurement = first
+        self._failed_cycles = self._reads_failed = self._writes_failed = 0
+        self._previous = (self._ticker.clock.now() - self._ticker.period, True)
+        reason, completed, at_rest, report = "", False, False, None
         with self._signals():
             try:
                 if approach is not None:
-                    self._stream("approach", approach, commanded, writer, ticker)
+                    self._follow("approach", approach)
                 plan = _plan_segment(trajectory)
-                self._stream("plan", plan, commanded, writer, ticker)
-                at_rest = self._settle("settle", commanded, writer, ticker, settings.settle_s)
+                self._follow("plan", plan)
+                at_rest = self._settle(plan.at(plan.duration)[0])
                 reason, completed = "completed", True
             except _Stop as stop:
                 reason = str(stop)
-                at_rest = self._safe_stop(reason, commanded, writer, ticker)
+                report = self._safe_stop(stop)
             except Exception as error:  # a bug or a backend's surprise: stop, then raise
                 reason = f"{type(error).__name__}: {error}"
-                at_rest = self._safe_stop(reason, commanded, writer, ticker)
+                report = self._safe_stop(_Stop(reason))
                 raise
             finally:
-                statistics = LoopStatistics.from_ticks(ticker.ticks, ticker.period)
+                at_rest = report.at_rest if report is not None else at_rest
+                statistics = LoopStatistics.from_ticks(self._ticker.ticks, self._ticker.period)
                 backend_state = self.backend.describe()
-                writer.close(
+                self._writer.close(
                     {
                         "completed": completed,
                         "reason": reason,
                         "at_rest": at_rest,
-                        "samples": writer.samples,
+                        "stop": None if report is None else dataclasses.asdict(report),
+                        "signals": list(self._signals_seen),
+                        "samples": self._writer.samples,
                         "loop": dataclasses.asdict(statistics),
                         "backend": backend_state,
                     }
                 )
         return ExecutionResult(
-            completed, reason, log_path, writer.samples, statistics, at_rest, backend_state
+            completed,
+            reason,
+            log_path,
+            self._writer.samples,
+            statistics,
+            at_rest,
+            backend_state,
+            report,
+            list(self._signals_seen),
         )
 
-    def _safe_stop(
-        self, reason: str, commanded: _Commanded, writer: LogWriter, ticker: _Ticker
-    ) -> bool:
-        """The jerk-limited stop from the commanded state, then the hold; True at rest."""
-        _LOG.warning("safe stop: %s", reason)
-        stop = self._ruckig_segment("stop", commanded, target=None)
-        self._stream("stop", stop, commanded, writer, ticker, stopping=True)
-        return self._settle("hold", commanded, writer, ticker, self.settings.hold_s)
-
-    def _stream(
-        self,
-        phase: str,
-        segment: _Segment,
-        commanded: _Commanded,
-        writer: LogWriter,
-        ticker: _Ticker,
-        stopping: bool = False,
-    ) -> None:
-        """Stream a segment's goals at the loop rate until its end; checks every reading
-        unless ``stopping``."""
-        length = segment.duration
-        failures = 0
+    # ------------------------------------------------------------------ phases
+    def _follow(self, phase: str, segment: _Segment) -> None:
+        """Stream a segment's goals, each sampled at its cycle's start, to its end; every
+        cycle is checked and a fault raises :class:`_Stop`."""
+        self._phase = phase
         begin = None
         while True:
-            now = ticker.wait()
-            if begin is None:  # a stop continues from the goal sent one period ago
-                begin = now - ticker.period if stopping else now
-            elapsed = min(now - begin, length)
-            if length - elapsed < 1e-9:  # the clock's rounding must not add a cycle
-                elapsed = length
-            expected = commanded.position
-            measurement, status = self._read(stopping)
-            failures = 0 if measurement is not None else failures + 1
-            if not stopping:
-                self._check(measurement, expected, failures, status)
-            position, velocity, acceleration = segment.at(elapsed)
-            try:
-                self.backend.write_goal(position)
-            except CommunicationError as error:
-                status = f"write failed: {error}"
-                if not stopping and failures + 1 > self.settings.communication_retries:
-                    raise _Stop(f"communication lost: {error}") from None
-            commanded.position, commanded.velocity = position, velocity
-            commanded.acceleration = acceleration
-            self._log(writer, now, phase, position, measurement, status)
-            if elapsed >= length:
+            cycle = self._begin_cycle()
+            begin = cycle.time_s if begin is None else begin
+            elapsed = min(cycle.time_s - begin, segment.duration)
+            if segment.duration - elapsed < _CLOCK_EPSILON_S:  # rounding must not add a cycle
+                elapsed = segment.duration
+            self._check(cycle, self._commanded.position)
+            self._send(cycle, *segment.at(elapsed))
+            self._end_cycle(phase, cycle, checked=True)
+            if elapsed >= segment.duration:
                 return
 
-    def _settle(
-        self,
-        phase: str,
-        commanded: _Commanded,
-        writer: LogWriter,
-        ticker: _Ticker,
-        duration: float,
-    ) -> bool:
-        """Hold the last goal for up to ``duration``; True once every joint is at rest."""
-        hold = _Commanded(commanded.position, np.zeros(2), np.zeros(2))
+    def _settle(self, target: np.ndarray) -> bool:
+        """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;
+        True if confirmed."""
+        self._phase = "settle"
+        window = _RestWindow(self.settings, self.problem.robot.actuator)
         begin = None
         while True:
-            now = ticker.wait()
-            begin = now if begin is None else begin
-            measurement, status = self._read(phase == "hold")
-            try:
-                self.backend.write_goal(hold.position)
-            except CommunicationError as error:
-                status = f"write failed: {error}"
-            self._log(writer, now, phase, hold.position, measurement, status)
-            at_rest = measurement is not None and bool(
-                np.all(np.abs(measurement.velocity_rad_s) < self.settings.rest_speed_rad_s)
-            )
-            if phase != "hold" and measurement is not None:
-                self._check(measurement, hold.position, 0, status)
-            if at_rest or now - begin >= duration:
-                return at_rest
+            cycle = self._begin_cycle()
+            begin = cycle.time_s if begin is None else begin
+            self._check(cycle, target)
+            self._send(cycle, target, np.zeros(2), np.zeros(2))
+            self._end_cycle("settle", cycle, checked=True)
+            if window.add(cycle.time_s, cycle.measurement):
+                return True
+            if cycle.time_s - begin >= self.settings.settle_s - _CLOCK_EPSILON_S:
+                return False
 
-    def _read(self, quiet: bool) -> tuple[Measurement | None, str]:
+    def _safe_stop(self, stop: _Stop) -> StopReport:
+        """The jerk-limited stop from the last goal delivered, then the hold."""
+        _LOG.warning("safe stop: %s", stop)
+        self._phase = "stop"
+        seen = stop.cycle.time_s if stop.cycle is not None else self.backend.clock.now()
+        before = self._last_measurement
+        reads, writes = self._reads_failed, self._writes_failed
+        errors: list[str] = []
+        segment = self._ruckig_segment("stop", self._commanded, target=None)
+        first = None if stop.logged else stop.cycle
+        delivered = self._stop_stream(segment, first, errors, seen)
+        at_rest, rest, confirmed = self._hold(errors)
+        travel = _travel(before, self._last_measurement)
+        return StopReport(
+            fault_seen_s=seen,
+            stop_delivered=delivered,
+            at_rest=at_rest,
+            rest=rest,
+            duration_s=None if confirmed is None else confirmed - seen,
+            travel_rad=travel,
+            travel_deg=None if travel is None else [t / DEG for t in travel],
+            failed_reads=self._reads_failed - reads,
+            failed_writes=self._writes_failed - writes,
+            hardware_errors=errors,
+        )
+
+    def _stop_stream(
+        self, segment: _Segment, first: _Cycle | None, errors: list[str], seen: float
+    ) -> bool:
+        """Stream the stop to its end; gives up ``hold_s`` after its planned end. True if
+        its last goal was delivered.
+
+        The stop's clock runs with the loop's while its goals get through; a failed write
+        pauses it (the goal after an outage is one period further along the profile than
+        the last one delivered), so the goals the actuators receive stay one jerk-limited
+        stream.
+        """
+        elapsed, cycle = 0.0, first
+        give_up = seen + segment.duration + self.settings.hold_s
+        while True:
+            cycle = cycle or self._begin_cycle()
+            self._observe(cycle, errors)
+            previous_s, delivered = self._previous
+            step = cycle.time_s - previous_s if delivered else self._ticker.period
+            t = min(elapsed + step, segment.duration)
+            if segment.duration - t < _CLOCK_EPSILON_S:
+                t = segment.duration
+            if self._send(cycle, *segment.at(t)):
+                elapsed = t
+            self._end_cycle("stop", cycle, checked=False)
+            if elapsed >= segment.duration:
+                return True
+            if cycle.time_s >= give_up:
+                _LOG.warning("stop given up at %.3f s of its %.3f s", elapsed, segment.duration)
+                return False
+            cycle = None
+
+    def _hold(self, errors: list[str]) -> tuple[bool, str, float | None]:
+        """Hold the last goal delivered until rest is confirmed or ``hold_s`` passes.
+
+        Returns (at rest, "confirmed" or why not, the time rest was confirmed or None).
+        Reads, hardware errors and signals are still watched: they are recorded, and a
+        failed read or a motion restarts the rest window.
+        """
+        self._phase = "hold"
+        window = _RestWindow(self.settings, self.problem.robot.actuator)
+        begin = None
+        while True:
+            cycle = self._begin_cycle()
+            begin = cycle.time_s if begin is None else begin
+            self._observe(cycle, errors)
+            self._send(cycle, self._commanded.position, np.zeros(2), np.zeros(2))
+            self._end_cycle("hold", cycle, checked=False)
+            if window.add(cycle.time_s, cycle.measurement):
+                return True, "confirmed", cycle.time_s
+            if cycle.time_s - begin >= self.settings.hold_s - _CLOCK_EPSILON_S:
+                why = f"not confirmed within the {self.settings.hold_s:g} s hold: {window.why()}"
+                _LOG.warning("rest %s", why)
+                return False, why, None
+
+    # ------------------------------------------------------------------ cycles
+    def _begin_cycle(self) -> _Cycle:
+        """Wait for the next deadline and read both actuators."""
+        cycle = _Cycle(self._ticker.wait())
         try:
-            return self.backend.read(), "ok"
+            cycle.measurement = self.backend.read()
+            self._last_measurement = cycle.measurement
         except CommunicationError as error:
-            if not quiet:
-                _LOG.info("read failed: %s", error)
-            return None, f"read failed: {error}"
+            _LOG.info("read failed: %s", error)
+            cycle.read_failed = True
+            cycle.notes.append(f"read failed: {error}")
+            self._reads_failed += 1
+        return cycle
 
-    def _check(
-        self, measurement: Measurement | None, expected: np.ndarray, failures: int, status: str
-    ) -> None:
-        """Raise :class:`_Stop` on a fault, an interrupt or too many failed reads."""
+    def _send(
+        self, cycle: _Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
+    ) -> bool:
+        """Write the goal; only a write that succeeded becomes the commanded state. A write
+        reported failed counts as not delivered, though a port can fail a packet that left
+        (see :mod:`spm_opt.execution.dynamixel`); the stop's first goal, one period along
+        from the last goal known, is then the one that arrived to within q̈ T²."""
+        try:
+            self.backend.write_goal(position)
+        except CommunicationError as error:
+            _LOG.info("write failed: %s", error)
+            cycle.write_failed = True
+            cycle.notes.append(f"write failed: {error}")
+            self._writes_failed += 1
+            return False
+        commanded = self._commanded
+        commanded.position, commanded.velocity = position, velocity
+        commanded.acceleration = acceleration
+        return True
+
+    def _end_cycle(self, phase: str, cycle: _Cycle, checked: bool) -> None:
+        """Count the cycle (failed if its read or its write did) and log it; when
+        ``checked``, a run of failures past the retry budget is a fault seen here."""
+        failed = cycle.read_failed or cycle.write_failed
+        self._failed_cycles = self._failed_cycles + 1 if failed else 0
+        self._previous = (cycle.time_s, not cycle.write_failed)
+        reason = ""
+        if checked and self._failed_cycles > self.settings.communication_retries:
+            reason = self._communication_lost(self._failed_cycles, cycle)
+            cycle.notes.append(reason)
+        self._log(phase, cycle)
+        if reason:
+            raise _Stop(reason, cycle, logged=True)
+
+    def _check(self, cycle: _Cycle, expected: np.ndarray) -> None:
+        """Raise :class:`_Stop` on an interrupt, too many failed cycles (this one's read
+        included), a hardware error or a following error; the reason joins the notes."""
+        reason = self._fault(cycle, expected)
+        if reason:
+            cycle.notes.append(reason)
+            raise _Stop(reason, cycle)
+
+    def _fault(self, cycle: _Cycle, expected: np.ndarray) -> str:
         if self._stop_requested:
-            raise _Stop(f"interrupted ({self._stop_requested})")
+            return f"interrupted ({self._stop_requested})"
+        failures = self._failed_cycles + 1 if cycle.read_failed else 0
         if failures > self.settings.communication_retries:
-            raise _Stop(
-                f"communication lost: {failures} reads failed in a row "
-                f"(retry budget {self.settings.communication_retries}); last: {status}"
-            )
+            return self._communication_lost(failures, cycle)
+        measurement = cycle.measurement
         if measurement is None:
-            return
+            return ""
         for joint, status_bits in enumerate(measurement.hardware_error):
             if status_bits:
                 names = ", ".join(hardware_error_names(status_bits))
-                raise _Stop(f"hardware error on actuator {joint + 1}: {names}")
+                return f"hardware error on actuator {joint + 1}: {names}"
         error = np.abs(measurement.position_rad - expected)
         worst = int(np.argmax(error))
         if error[worst] > self.settings.following_error_rad:
-            raise _Stop(
+            return (
                 f"following error of theta{worst + 1}: {error[worst] / DEG:.3f} deg "
                 f"(tolerance {self.settings.following_error_rad / DEG:.3f} deg)"
             )
+        return ""
 
-    def _log(
-        self,
-        writer: LogWriter,
-        now: float,
-        phase: str,
-        goal: np.ndarray,
-        measurement: Measurement | None,
-        status: str,
-    ) -> None:
+    def _communication_lost(self, failures: int, cycle: _Cycle) -> str:
+        return (
+            f"communication lost: {failures} cycles in a row with a failed read or write "
+            f"(retry budget {self.settings.communication_retries}); last: {cycle.status}"
+        )
+
+    def _observe(self, cycle: _Cycle, errors: list[str]) -> None:
+        """During the stop and the hold: record the hardware errors reported."""
+        if cycle.measurement is None:
+            return
+        for joint, status_bits in enumerate(cycle.measurement.hardware_error):
+            if status_bits:
+                entry = f"actuator {joint + 1}: {', '.join(hardware_error_names(status_bits))}"
+                if entry not in errors:
+                    _LOG.warning("hardware error while stopping: %s", entry)
+                    errors.append(entry)
+
+    def _log(self, phase: str, cycle: _Cycle) -> None:
+        """One sample: the goal the actuators hold (the last delivered) and the reading."""
+        goal, measurement = self._commanded.position, cycle.measurement
         if measurement is None:
-            writer.append(now, phase, goal, None, None, status)
+            self._writer.append(cycle.time_s, phase, goal, None, None, cycle.status)
             return
         torque = self._torque_map.torque(measurement.current_a)
         values = (
@@ -457,7 +705,9 @@ class Executor:
             measurement.current_a,
             torque,
         )
-        writer.append(now, phase, goal, values, measurement.hardware_error, status)
+        self._writer.append(
+            cycle.time_s, phase, goal, values, measurement.hardware_error, cycle.status
+        )
 
     def _ruckig_segment(
         self, name: str, commanded: _Commanded, target: np.ndarray | None, speed: float = 0.0
@@ -494,14 +744,19 @@ class Executor:
 
     @contextmanager
     def _signals(self) -> Iterator[None]:
-        """SIGINT and SIGTERM ask for a safe stop (in the main thread only)."""
+        """SIGINT and SIGTERM ask for a safe stop (in the main thread only); each one is
+        recorded with the phase it arrived in, also during the stop and the hold, which
+        go on."""
         self._stop_requested = None
+        self._signals_seen = []
         if threading.current_thread() is not threading.main_thread():
             yield
             return
 
         def request(signum: int, _frame: Any) -> None:
-            self._stop_requested = signal.Signals(signum).name
+            name = signal.Signals(signum).name
+            self._signals_seen.append(f"{name} during {self._phase}")
+            self._stop_requested = self._stop_requested or name
 
         previous = {s: signal.signal(s, request) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
@@ -519,6 +774,13 @@ def _plan_segment(trajectory: Trajectory) -> _Segment:
         return trajectory.position(at), trajectory.velocity(at), trajectory.acceleration(at)
 
     return _Segment(trajectory.duration, goal)
+
+
+def _travel(before: Measurement | None, after: Measurement | None) -> list[float] | None:
+    """How far each joint moved between two readings, rad (None without both)."""
+    if before is None or after is None:
+        return None
+    return [float(d) for d in np.abs(after.position_rad - before.position_rad)]
 
 
 def _degrees(q: np.ndarray) -> str:

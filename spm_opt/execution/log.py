@@ -38,7 +38,9 @@ COLUMNS = (
     "hardware_error_2",
     "status",
 )
-"""Columns of the CSV log; measured values are empty in a cycle whose read failed."""
+"""Columns of the CSV log. ``time_s``: when the cycle began (to the ns), the time its goal
+was sampled at; the goals: what the actuators hold after the cycle (a failed write leaves
+the last goal delivered); measured values are empty in a cycle whose read failed."""
 
 
 def header_path(log_path: Path) -> Path:
@@ -79,7 +81,7 @@ class LogWriter:
         status: str,
     ) -> None:
         """One sample: ``measured`` is (position, velocity, current, torque) or None."""
-        values = [f"{time_s:.6f}", phase, *(f"{v:.9g}" for v in goal)]
+        values = [f"{time_s:.9f}", phase, *(f"{v:.9g}" for v in goal)]
         if measured is None:
             values += [""] * 8
         else:

@@ -24,6 +24,9 @@ An actuator whose torque is off is held by its 502:1 gear train (which the load 
 back-drive): its joint stays where it is. Sensors: Present Position quantised to the
 encoder's 361,384 pulse/rev, Present Velocity to its 0.00199234 rpm unit, Present Current
 to its 16.11 mA unit after seeded Gaussian noise.
+
+What the sensors cannot show, :class:`TrueState` and :class:`StateTrace` give tests and
+post-mortems: the plant's exact joint angles and rates, without quantisation or noise.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -74,6 +78,64 @@ class PlantSettings:
     seed: int = 0
 
 
+@dataclass(frozen=True)
+class TrueState:
+    """The plant's exact state at one instant (no encoder quantisation, no noise).
+
+    Attributes
+    ----------
+    time_s : float, s
+        On the clock of whoever sampled it (the backend's clock, or the emulator's).
+    position_rad : ndarray, shape (2,), rad
+    velocity_rad_s : ndarray, shape (2,), rad/s
+    goal_rad : ndarray, shape (2,), rad
+        The goal positions the actuators hold.
+    """
+
+    time_s: float
+    position_rad: np.ndarray
+    velocity_rad_s: np.ndarray
+    goal_rad: np.ndarray
+
+
+class StateTrace:
+    """The plant's true state, sampled over a run: appended in memory, saved as ``.npz``."""
+
+    FIELDS = ("time_s", "position_rad", "velocity_rad_s", "goal_rad")
+
+    def __init__(self) -> None:
+        self._rows: list[tuple[float, ...]] = []
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def record(self, time_s: float, plant: DynamixelPlant) -> None:
+        """Append the plant's present state, sampled at ``time_s`` (s)."""
+        q, v, goal = plant.position_rad, plant.velocity_rad_s, plant.goal_position_rad
+        self._rows.append((time_s, q[0], q[1], v[0], v[1], goal[0], goal[1]))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """``time_s`` (n,) and ``position_rad``, ``velocity_rad_s``, ``goal_rad`` (n, 2)."""
+        table = np.array(self._rows, dtype=float).reshape(-1, 7)
+        return {
+            "time_s": table[:, 0],
+            "position_rad": table[:, 1:3],
+            "velocity_rad_s": table[:, 3:5],
+            "goal_rad": table[:, 5:7],
+        }
+
+    def save(self, path: str | Path) -> None:
+        """Write :meth:`arrays` to ``path`` (``.npz``)."""
+        with open(path, "wb") as file:
+            np.savez(file, **self.arrays())
+
+    @staticmethod
+    def load(path: str | Path) -> dict[str, np.ndarray]:
+        """The arrays a :meth:`save` wrote."""
+        with np.load(path) as data:
+            return {name: data[name] for name in StateTrace.FIELDS}
+
+
 class DynamixelPlant:
     """Two actuators and the robot, integrated in steps of ``settings.step_s``.
 
@@ -110,6 +172,15 @@ class DynamixelPlant:
         self.hardware_error = np.zeros(2, dtype=np.int64)
         self.encoder_stuck = np.zeros(2, dtype=bool)
         self._reported_pulses = actuator.pulses(start)
+
+    def true_state(self, time_s: float) -> TrueState:
+        """The exact present state (copies), labelled with ``time_s`` (s)."""
+        return TrueState(
+            time_s,
+            self.position_rad.copy(),
+            self.velocity_rad_s.copy(),
+            self.goal_position_rad.copy(),
+        )
 
     # ----------------------------------------------------------------- commands
     def enable_torque(self, joint: int, on: bool) -> None:

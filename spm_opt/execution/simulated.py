@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from spm_opt.execution.backend import Clock, Measurement, MonotonicClock, VirtualClock
-from spm_opt.execution.plant import DynamixelPlant, PlantSettings
+from spm_opt.execution.plant import DynamixelPlant, PlantSettings, StateTrace, TrueState
 from spm_opt.model.params import Robot
 
 
@@ -24,6 +24,12 @@ class SimulatedRobot:
     realtime : bool
         False (default): simulated time jumps from one control period to the next, so a run
         takes as long as its computation. True: the plant follows the machine's clock.
+
+    Attributes
+    ----------
+    plant : DynamixelPlant
+    trace : StateTrace
+        The plant's true state at every ``read``, on the backend's clock (the log's time).
     """
 
     def __init__(
@@ -38,6 +44,13 @@ class SimulatedRobot:
         self.realtime = realtime
         self.clock: Clock = MonotonicClock() if realtime else VirtualClock()
         self._epoch = self.clock.now()
+        self.trace = StateTrace()
+
+    @property
+    def true_state(self) -> TrueState:
+        """The plant's exact state now (no quantisation, no noise), on the backend's clock."""
+        self.plant.advance_to(self.clock.now() - self._epoch)
+        return self.plant.true_state(self.clock.now())
 
     def connect(self) -> None:
         """Enable torque on both actuators (each holds where it is)."""
@@ -46,7 +59,9 @@ class SimulatedRobot:
             self.plant.enable_torque(joint, True)
 
     def read(self) -> Measurement:
-        self.plant.advance_to(self.clock.now() - self._epoch)
+        now = self.clock.now()
+        self.plant.advance_to(now - self._epoch)
+        self.trace.record(now, self.plant)
         a = self._actuator
         return Measurement(
             position_rad=a.angle(self.plant.present_position_pulses()),
