@@ -143,7 +143,10 @@ def _emulate_parser(commands: argparse._SubParsersAction) -> None:
     emulate.add_argument("--ids", default="1,2", help="actuator ids (default 1,2)")
     emulate.add_argument("--start-deg", default="0,0", metavar="A,B", help="start angles")
     emulate.add_argument(
-        "--fault", action="append", default=[], help="inject a fault, e.g. overload:id=1,at=3.0"
+        "--fault",
+        action="append",
+        default=[],
+        help="inject a fault (drop, crc, delay, overload, stuck, write), e.g. overload:id=1,at=3",
     )
     emulate.add_argument("--seed", type=int, default=0, help="seed of the current noise")
 

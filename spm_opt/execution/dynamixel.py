@@ -1,6 +1,6 @@
 """Two Dynamixel PRO actuators through the official ``dynamixel-sdk`` (Protocol 2.0).
 
-Facts from ``shared/reference/dynamixel-l54.md``. One control cycle is two transactions:
+Facts from ``docs/dynamixel.md``. One control cycle is two transactions:
 
 - ``read``: one sync read of 12 bytes at 611 (Present Position 4, Present Velocity 4, two
   unlisted bytes, Present Current 2) for both ids. The instruction goes out through the

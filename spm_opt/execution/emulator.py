@@ -31,7 +31,7 @@ Acceleration are stored and read back but do not act. Torque Enable cannot be se
 hardware error is pending (the write is accepted; the table keeps 0). A write of ID (7)
 changes the id the actuator answers to.
 
-The control table follows the original PRO firmware (``shared/reference/dynamixel-l54.md``);
+The control table follows the original PRO firmware (``docs/dynamixel.md``);
 Firmware Version (address 6, read-only) is added so that the table agrees with ping.
 
 Faults (:class:`Faults`) are timed from the first goal-position write (a write or sync

@@ -1,6 +1,6 @@
 """The Dynamixel PRO L54-50-S500-R that drives each input arc (paper Table V).
 
-Facts from ``shared/reference/dynamixel-l54.md``: continuous ratings, the control table's
+Facts from ``docs/dynamixel.md``: continuous ratings, the control table's
 units, and the current↔torque map. No torque constant is published (the curve exists only
 as an image), so the map is an explicit, replaceable table: by default the line through
 (0 A, 0 N·m) and the continuous rating (1.9 A, 14.0 N·m), 7.37 N·m/A. A robot file may

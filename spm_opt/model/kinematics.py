@@ -1,6 +1,6 @@
 """Kinematics of the spherical parallel manipulator (paper Eqs. 1, 2, 5, 17, 18).
 
-Conventions (``shared/reference/model-notes.md``): the isocenter is the origin, z up; the
+Conventions (``docs/conventions.md``): the isocenter is the origin, z up; the
 upper input arc turns about x by θ1, the lower arc about y by θ2; the upper platform's
 mass centre B lies on the sphere |B| = r_u.
 
