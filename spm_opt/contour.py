@@ -171,7 +171,12 @@ class Contour:
         The chord 2 ρ sin(δ/2) between the cut point and the nearest contour point, with δ
         the angle between them and ρ the skull radius there.
         """
-        near = self.nearest(directions)
+        return self.chord(self.nearest(directions))
+
+    @staticmethod
+    def chord(near: Nearest) -> np.ndarray:
+        """Distance (N,), m, from each nearest contour point to the cut point it is nearest
+        to: 2 ρ sin(δ/2) (see :meth:`deviation`)."""
         return 2.0 * near.radius * np.sin(near.offset / 2.0)
 
     def joint_tool_speed(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from spm_opt.errors import DeviceError, InputError
+from spm_opt.errors import DeviceError, InputError, require
 from spm_opt.execution.backend import (
     CommunicationError,
     Measurement,
@@ -410,13 +410,8 @@ class DynamixelRobot:
 
     # ------------------------------------------------------------------ internals
     def _open(self) -> None:
-        try:
-            import dynamixel_sdk as sdk
-        except ImportError as exc:
-            raise ImportError(
-                "the Dynamixel backend needs the dynamixel-sdk package (pip install dynamixel-sdk)"
-            ) from exc
-        import serial
+        serial = require("serial", "the Dynamixel backend")
+        sdk = require("dynamixel_sdk", "the Dynamixel backend")
 
         self.close()
         port = sdk.PortHandler(self.port)

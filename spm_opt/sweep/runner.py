@@ -64,9 +64,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
-from spm_opt.errors import InputError, SpmOptError
+from spm_opt.errors import InputError, SpmOptError, require
 from spm_opt.sweep.results import RESULTS_FILE
 from spm_opt.sweep.task import MACHINE, RESULT, Task, failure_kind, run_task
 
@@ -188,7 +187,7 @@ def run_sweep(
         )
         if pending and scheduler is None and workers > 1:
             _check_picklable(task_function)
-        bar = tqdm(
+        bar = require("tqdm", "the sweep's progress bar").tqdm(
             total=len(tasks),
             initial=skipped,
             desc=name,
@@ -543,12 +542,7 @@ def _dask_rows(
 ) -> Iterator[Row]:
     """Rows in the order the tasks finish on a Dask cluster (a local one, started and
     stopped here, or the one at the scheduler's address)."""
-    try:
-        import distributed
-    except ImportError:
-        raise InputError(
-            f"--scheduler {scheduler}: needs the 'distributed' package (pip install distributed)"
-        ) from None
+    distributed = require("distributed", f"--scheduler {scheduler}")
     cluster = None
     if scheduler == "local":
         cluster = distributed.LocalCluster(
