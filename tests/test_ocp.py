@@ -158,9 +158,8 @@ def test_min_time_on_other_flaps(name):
         ("craniotomy_five_landmarks", "ocp-min-jerk"),
         ("craniotomy_large_flap", "ocp-mix"),
         ("craniotomy_five_landmarks", "ocp-mix"),
-        # two minutes a solve: one flap here (the large one passes too: 0.107 mm, no
-        # violation, 175 s)
-        ("craniotomy_five_landmarks", "ocp-min-energy"),
+        # ocp-min-energy is tested on the paper's flap below: on these two it is clean too,
+        # but takes 5.4 and 11 minutes (one re-solve each), more than CI can spend
     ],
 )
 def test_fixed_time_and_mixed_planners_on_other_flaps(name, planner):
