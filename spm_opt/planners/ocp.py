@@ -640,6 +640,8 @@ class OcpPlanner:
                 return trajectory
             if round_ > REFINEMENTS:
                 break
+            # from x alone: continuing with its multipliers as well halves the iterations
+            # but ends in worse optima (five landmarks: ∫τᵀτ 0.885 against 0.855)
             bounds = _tightened(bounds, broken)
             x, again = self._solve(problem, settings, bounds, with_torque, x)
             statistics = _added(statistics, again)
@@ -675,13 +677,14 @@ class OcpPlanner:
         with_torque: bool,
         x0: np.ndarray,
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Solve from ``x0``; the solution x and the statistics. An early stop at IPOPT's
+        acceptable level is continued strictly from there (with its multipliers)."""
         started = time.perf_counter()
         solver, terms, layout = _nlp(len(problem.segment_durations), settings, with_torque)
         construction = time.perf_counter() - started
         weights = [settings.time_weight, settings.energy_weight, settings.jerk_weight]
-        scales = np.ones(3)
-        at_guess = terms(x0, _parameters(problem, weights, scales))
-        scales = np.maximum(np.abs([float(v) for v in at_guess]), 1e-9)
+        at_guess = terms(x0, _parameters(problem, weights, np.ones(3)))
+        scales = np.maximum(np.abs([float(v) for v in at_guess]), 1e-9)  # terms at the guess
         parameters = _parameters(problem, weights, scales)
         box = _bounds(problem, layout, bounds, settings.timing, layout.grid.split(x0)[2])
         started = time.perf_counter()
@@ -691,8 +694,7 @@ class OcpPlanner:
         if stats["return_status"] == ACCEPTABLE:  # loose: re-solve strictly from there
             strict = dataclasses.replace(settings, acceptable_iterations=0)
             solver = _nlp(len(problem.segment_durations), strict, with_torque)[0]
-            warm = {"x0": solution["x"], "lam_x0": solution["lam_x"], "lam_g0": solution["lam_g"]}
-            solution = solver(**warm, p=parameters, **box)
+            solution = solver(**_continuation(solution), p=parameters, **box)
             stats = solver.stats()
             statuses.append(stats["return_status"])
             iterations += int(stats["iter_count"])
@@ -719,6 +721,11 @@ class OcpPlanner:
             "effort_n2m2s": effort if with_torque else None,
             "jerk_integral_rad2_s5": jerk_integral,
         }
+
+
+def _continuation(solution: dict[str, ca.DM]) -> dict[str, ca.DM]:
+    """IPOPT's warm start from a solution: its x and multipliers."""
+    return {"x0": solution["x"], "lam_x0": solution["lam_x"], "lam_g0": solution["lam_g"]}
 
 
 def _torque_exceeded(problem: Problem, grid: _Grid, bounds: PlannerBounds, x: np.ndarray) -> bool:
