@@ -28,8 +28,9 @@ DEFAULT_RATE_HZ = 1000.0
 
 @dataclass(frozen=True)
 class Violation:
-    """One limit broken: the worst value, the limit and when (units in ``unit``);
-    ``rule`` names its entry in :data:`spm_opt.limits.RULES`."""
+    """One limit broken: the worst value, the limit (``allowed``, before the evaluator's
+    tolerance) and when (units in ``unit``); ``rule`` names its entry in
+    :data:`spm_opt.limits.RULES`."""
 
     limit: str
     worst: float
@@ -41,7 +42,7 @@ class Violation:
     def __str__(self) -> str:
         return (
             f"{self.limit}: {self.worst:.4g} {self.unit} at t = {self.time_s:.3f} s "
-            f"(allowed {self.allowed:.4g} {self.unit})"
+            f"(limit {self.allowed:.4g} {self.unit})"
         )
 
 
