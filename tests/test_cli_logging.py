@@ -29,25 +29,25 @@ def plan_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return plan
 
 
-def _without_compiler(tmp_path: Path) -> dict[str, str]:
-    """The environment with no C compiler to be found (an empty PATH, no CC)."""
+def _run_without_compiler(command: list[str], tmp_path: Path) -> subprocess.CompletedProcess:
+    """``command`` in ``tmp_path`` with no C compiler to be found (an empty PATH, no CC)."""
     empty = tmp_path / "bin"
     empty.mkdir()
     env = {key: value for key, value in os.environ.items() if key != "CC"}
-    return {**env, "PATH": str(empty)}
-
-
-def test_no_c_compiler_is_a_warning_on_stderr(tmp_path: Path, plan_csv: Path) -> None:
-    command = [sys.executable, "-m", "spm_opt.cli", "evaluate", str(PAPER_PROBLEM), str(plan_csv)]
-    result = subprocess.run(
+    return subprocess.run(
         command,
         capture_output=True,
         text=True,
         timeout=300,
         cwd=tmp_path,
-        env=_without_compiler(tmp_path),
+        env={**env, "PATH": str(empty)},
         check=False,
     )
+
+
+def test_no_c_compiler_is_a_warning_on_stderr(tmp_path: Path, plan_csv: Path) -> None:
+    command = [sys.executable, "-m", "spm_opt.cli", "evaluate", str(PAPER_PROBLEM), str(plan_csv)]
+    result = _run_without_compiler(command, tmp_path)
     assert result.returncode == 0, result.stderr
     warnings = result.stderr.splitlines()
     assert warnings, "the missing compiler was not reported"
@@ -64,15 +64,7 @@ def test_the_library_itself_prints_nothing(tmp_path: Path, plan_csv: Path) -> No
         f"import spm_opt as so; p = so.load_problem({str(PAPER_PROBLEM)!r}); "
         f"so.evaluate(p, so.Trajectory.from_csv({str(plan_csv)!r}))"
     )
-    result = subprocess.run(
-        [sys.executable, "-c", script],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=tmp_path,
-        env=_without_compiler(tmp_path),
-        check=False,
-    )
+    result = _run_without_compiler([sys.executable, "-c", script], tmp_path)
     assert result.returncode == 0, result.stderr
     assert result.stderr == ""
 

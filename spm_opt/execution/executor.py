@@ -503,19 +503,10 @@ class Executor:
     def _settle(self, target: np.ndarray) -> bool:
         """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;
         True if confirmed."""
-        self._phase = "settle"
-        window = _RestWindow(self.settings, self.problem.robot.actuator)
-        begin = None
-        while True:
-            cycle = self._begin_cycle()
-            begin = cycle.time_s if begin is None else begin
-            self._check(cycle, target)
-            self._send(cycle, target, np.zeros(2), np.zeros(2))
-            self._end_cycle("settle", cycle, checked=True)
-            if window.add(cycle.time_s, cycle.measurement):
-                return True
-            if cycle.time_s - begin >= self.settings.settle_s - _CLOCK_EPSILON_S:
-                return False
+        confirmed, _ = self._rest(
+            "settle", target, self.settings.settle_s, lambda c: self._check(c, target), True
+        )
+        return confirmed is not None
 
     def _safe_stop(self, stop: _Stop) -> StopReport:
         """The jerk-limited stop from the last goal delivered, then the hold."""
@@ -581,21 +572,40 @@ class Executor:
         Reads, hardware errors and signals are still watched: they are recorded, and a
         failed read or a motion restarts the rest window.
         """
-        self._phase = "hold"
+        hold_s = self.settings.hold_s
+        confirmed, window = self._rest(
+            "hold", self._commanded.position, hold_s, lambda c: self._observe(c, errors), False
+        )
+        if confirmed is not None:
+            return True, "confirmed", confirmed
+        why = f"not confirmed within the {hold_s:g} s hold: {window.why()}"
+        _LOG.warning("rest %s", why)
+        return False, why, None
+
+    def _rest(
+        self,
+        phase: str,
+        target: np.ndarray,
+        limit_s: float,
+        inspect: Callable[[_Cycle], None],
+        checked: bool,
+    ) -> tuple[float | None, _RestWindow]:
+        """Hold ``target`` (rad), each cycle inspected (``checked``: a run of failed cycles
+        is a fault), until rest is confirmed or ``limit_s`` (s) passes; the time rest was
+        confirmed (None if not), and the window."""
+        self._phase = phase
         window = _RestWindow(self.settings, self.problem.robot.actuator)
         begin = None
         while True:
             cycle = self._begin_cycle()
             begin = cycle.time_s if begin is None else begin
-            self._observe(cycle, errors)
-            self._send(cycle, self._commanded.position, np.zeros(2), np.zeros(2))
-            self._end_cycle("hold", cycle, checked=False)
+            inspect(cycle)
+            self._send(cycle, target, np.zeros(2), np.zeros(2))
+            self._end_cycle(phase, cycle, checked=checked)
             if window.add(cycle.time_s, cycle.measurement):
-                return True, "confirmed", cycle.time_s
-            if cycle.time_s - begin >= self.settings.hold_s - _CLOCK_EPSILON_S:
-                why = f"not confirmed within the {self.settings.hold_s:g} s hold: {window.why()}"
-                _LOG.warning("rest %s", why)
-                return False, why, None
+                return cycle.time_s, window
+            if cycle.time_s - begin >= limit_s - _CLOCK_EPSILON_S:
+                return None, window
 
     # ------------------------------------------------------------------ cycles
     def _begin_cycle(self) -> _Cycle:
