@@ -13,7 +13,9 @@ from spm_opt.execution.plant import DynamixelPlant, StateTrace, _minimise
 from spm_opt.model import dynamics
 
 angles = st.floats(-0.8, 0.8)
-rates = st.floats(-0.5, 0.5)
+# no subnormal rates: at 5e-324 rad/s one of two algebraically equal slide velocities
+# underflows to 0 and the other does not, so sign() differs (found on a fresh run)
+rates = st.floats(-0.5, 0.5, allow_subnormal=False)
 
 
 @given(angles, angles, rates, rates, rates, rates)
