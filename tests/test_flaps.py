@@ -9,10 +9,12 @@ from conftest import ROOT
 
 import spm_opt as so
 from spm_opt.model.params import MM
-from spm_opt.sweep.flaps import Flap, random_flaps
+from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION, Flap, random_flaps
 
 SIZES_MM = (20.0, 90.0)
 SPEED_MM_S = 3.0
+TOLERANCES_MM = (0.05, 0.2)
+SPEED_LIMITS_MM_S = (2.0, 4.0)
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +24,20 @@ def flaps(paper_problem: so.Problem) -> list[Flap]:
         *random_flaps(paper_problem, 4, SIZES_MM, landmarks=3, seed=12),
         *random_flaps(paper_problem, 4, SIZES_MM, landmarks=6, seed=13),
     ]
+
+
+@pytest.fixture(scope="module")
+def varied(paper_problem: so.Problem) -> list[Flap]:
+    """200 flaps of 4-6 landmarks, each with its own contour tolerance and speed limit."""
+    return random_flaps(
+        paper_problem,
+        200,
+        (20.0, 50.0),
+        (4, 6),
+        seed=21,
+        contour_tolerance_mm=TOLERANCES_MM,
+        max_tool_speed_mm_s=SPEED_LIMITS_MM_S,
+    )
 
 
 def _tangent_plane(flap: Flap) -> np.ndarray:
@@ -165,6 +181,85 @@ def test_cubic_planner_succeeds_on_generated_flaps(paper_problem, flaps):
         )
 
 
+def test_new_draws_leave_the_shapes_alone(paper_problem):
+    """Drawing limits, or a landmark range of one count, draws the same flaps as without."""
+    plain = random_flaps(paper_problem, 6, (20.0, 50.0), 4, seed=2026)
+    limited = random_flaps(
+        paper_problem,
+        6,
+        (20.0, 50.0),
+        (4, 4),
+        seed=2026,
+        contour_tolerance_mm=TOLERANCES_MM,
+        max_tool_speed_mm_s=SPEED_LIMITS_MM_S,
+    )
+    for a, b in zip(plain, limited, strict=True):
+        np.testing.assert_array_equal(a.positions_mm, b.positions_mm)
+        assert (a.names, a.size_mm) == (b.names, b.size_mm)
+        assert (a.contour_tolerance_mm, a.max_tool_speed_mm_s) == (None, None)
+        assert a.limit_overrides() == {} and a.mean_speed_mm_s(2.0) == 2.0
+    # and the tolerances do not depend on whether the speed limit is drawn too
+    alone = random_flaps(paper_problem, 6, (20.0, 50.0), seed=2026, contour_tolerance_mm=(0.1, 0.2))
+    both = random_flaps(
+        paper_problem,
+        6,
+        (20.0, 50.0),
+        seed=2026,
+        contour_tolerance_mm=(0.1, 0.2),
+        max_tool_speed_mm_s=SPEED_LIMITS_MM_S,
+    )
+    assert [f.contour_tolerance_mm for f in alone] == [f.contour_tolerance_mm for f in both]
+
+
+def test_landmark_counts_are_drawn_in_the_range(varied):
+    counts = [len(flap.names) for flap in varied]
+    assert set(counts) == {4, 5, 6}
+    assert all(flap.names == tuple(f"F{i + 1}" for i in range(len(flap.names))) for flap in varied)
+
+
+def test_limits_are_drawn_in_their_ranges_the_tolerance_log_uniformly(paper_problem, varied):
+    tolerances = np.array([flap.contour_tolerance_mm for flap in varied])
+    speeds = np.array([flap.max_tool_speed_mm_s for flap in varied])
+    assert np.all((tolerances >= 0.05) & (tolerances <= 0.2))
+    assert np.all((speeds >= 2.0) & (speeds <= 4.0))
+    # log-uniform: half below the geometric mean, 0.1 mm (uniform would put a third there)
+    assert 0.4 < np.mean(tolerances < 0.1) < 0.6
+    assert 0.4 < np.mean(speeds < 3.0) < 0.6  # uniform: half below the middle
+    again = random_flaps(
+        paper_problem,
+        3,
+        (20.0, 50.0),
+        (4, 6),
+        seed=21,
+        contour_tolerance_mm=TOLERANCES_MM,
+        max_tool_speed_mm_s=SPEED_LIMITS_MM_S,
+    )
+    assert [f.limit_overrides() for f in again] == [f.limit_overrides() for f in varied[:3]]
+
+
+def test_equal_bounds_draw_that_value(paper_problem):
+    (flap,) = random_flaps(
+        paper_problem, 1, (30.0, 30.0), contour_tolerance_mm=(0.1, 0.1), max_tool_speed_mm_s=(3, 3)
+    )
+    assert flap.limit_overrides() == {
+        "limits.contour_tolerance_mm": 0.1,
+        "limits.max_tool_speed_mm_s": 3.0,
+    }
+
+
+def test_drawn_limits_set_the_problem_and_slow_its_durations(paper_problem, varied):
+    for flap in varied[:20]:
+        problem = flap.problem(paper_problem, 2.0)
+        assert problem.limits.contour_tolerance == pytest.approx(flap.contour_tolerance_mm * MM)
+        assert problem.limits.max_tool_speed == pytest.approx(flap.max_tool_speed_mm_s * MM)
+        assert problem.limits.max_joint_speed == paper_problem.limits.max_joint_speed
+        mean = flap.mean_speed_mm_s(2.0)
+        assert mean == min(2.0, DURATION_SPEED_FRACTION * flap.max_tool_speed_mm_s)
+        np.testing.assert_array_equal(problem.segment_durations, flap.segment_durations_s(mean))
+    slow = [flap for flap in varied if flap.max_tool_speed_mm_s < 3.0]
+    assert slow and all(flap.mean_speed_mm_s(2.0) < 2.0 for flap in slow)
+
+
 @pytest.mark.parametrize(
     ("arguments", "named"),
     [
@@ -182,6 +277,21 @@ def test_cubic_planner_succeeds_on_generated_flaps(paper_problem, flaps):
         ({"size_range_mm": (10.0,)}, "size_range_mm"),
         ({"size_range_mm": ("10", "20")}, "size_range_mm"),
         ({"size_range_mm": 30.0}, "size_range_mm"),
+        ({"landmarks": (2, 5)}, "landmarks"),
+        ({"landmarks": (5, 4)}, "landmarks"),
+        ({"landmarks": (4.0, 5)}, "landmarks"),
+        ({"landmarks": (4,)}, "landmarks"),
+        ({"landmarks": (4, 5, 6)}, "landmarks"),
+        ({"landmarks": "4"}, "landmarks"),
+        ({"contour_tolerance_mm": (0.0, 0.2)}, "contour_tolerance_mm"),
+        ({"contour_tolerance_mm": (-0.1, 0.2)}, "contour_tolerance_mm"),
+        ({"contour_tolerance_mm": (0.2, 0.1)}, "contour_tolerance_mm"),
+        ({"contour_tolerance_mm": (0.1, math.inf)}, "contour_tolerance_mm"),
+        ({"contour_tolerance_mm": 0.1}, "contour_tolerance_mm"),
+        ({"max_tool_speed_mm_s": (0.0, 3.0)}, "max_tool_speed_mm_s"),
+        ({"max_tool_speed_mm_s": (4.0, 2.0)}, "max_tool_speed_mm_s"),
+        ({"max_tool_speed_mm_s": (math.nan, 3.0)}, "max_tool_speed_mm_s"),
+        ({"max_tool_speed_mm_s": (True, 3.0)}, "max_tool_speed_mm_s"),
     ],
 )
 def test_bad_arguments_give_one_line_errors(paper_problem, arguments, named):

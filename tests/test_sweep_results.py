@@ -109,6 +109,28 @@ def flaps(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _write(tmp_path_factory.mktemp("flaps"), rows)
 
 
+@pytest.fixture(scope="module")
+def varied_flaps(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """30 flaps × 2 planners, with drawn landmark counts (4, 5, 6 in turn), tolerances and
+    tool-speed limits: "cubic" always clean; "ocp" fails on every 6-landmark flap."""
+    rows = []
+    for flap in range(30):
+        landmarks = 4 + flap % 3
+        parameters = {
+            "flap": flap,
+            "flap_size_mm": 20.0 + flap,
+            "flap_landmarks": landmarks,
+            "limits.contour_tolerance_mm": 0.05 * 4 ** (flap / 29),
+            "limits.max_tool_speed_mm_s": 2.0 + flap / 15,
+        }
+        rows.append(_row(f"c{flap}", "varied", "cubic", parameters, "ok", duration_s=40.0))
+        if landmarks == 6:
+            rows.append(_row(f"o{flap}", "varied", "ocp", parameters, "failed", error="Timeout"))
+        else:
+            rows.append(_row(f"o{flap}", "varied", "ocp", parameters, "ok", duration_s=30.0))
+    return _write(tmp_path_factory.mktemp("varied"), rows)
+
+
 def _section(summary: str, heading: str) -> list[list[str]]:
     """The cells of the table under a markdown heading."""
     part = summary.split(f"## {heading}\n", 1)[1].split("\n## ", 1)[0]
@@ -262,7 +284,12 @@ def test_parquet_and_csv_round_trip(grid: Path, grid_report: list[Path]) -> None
 
 def test_flap_report(flaps: Path) -> None:
     names = {path.name for path in write_sweep_report(flaps)}
-    assert {"flap_robustness.png", "flap_histograms.png", "metrics_vs_flap_size_mm.png"} <= names
+    assert {
+        "flap_robustness.png",
+        "flap_histograms.png",
+        "flap_robustness_by_parameter.png",
+        "metrics_vs_flap_size_mm.png",
+    } <= names
     assert not any(name.startswith("heatmap_") or name == "metrics_vs_flap.png" for name in names)
     summary = (flaps / "summary.md").read_text(encoding="utf-8")
     assert summary.startswith("# Sweep flaps\n")
@@ -277,6 +304,60 @@ def test_flap_report(flaps: Path) -> None:
     assert _section(summary, "Most common failures") == [["4", "ocp (4)", "`Timeout`"]]
     # 10 sizes, not more than MAX_LEVELS: a row per size and planner
     assert len(_section(summary, "Medians by flap_size_mm")) == 30
+
+
+def test_drawn_flap_parameters_are_tabulated_and_drawn(varied_flaps: Path) -> None:
+    names = {path.name for path in write_sweep_report(varied_flaps)}
+    assert {
+        "flap_robustness.png",
+        "flap_robustness_by_parameter.png",
+        "metrics_vs_flap_landmarks.png",
+        "metrics_vs_limits_contour_tolerance_mm.png",
+        "metrics_vs_limits_max_tool_speed_mm_s.png",
+    } <= names
+    summary = (varied_flaps / "summary.md").read_text(encoding="utf-8")
+    assert "- swept: flap_landmarks (3 values: 4, 5, 6)" in summary
+    by_count = _section(summary, "Medians by flap_landmarks")
+    # landmarks, planner, tasks, planned, clean, planned %, clean %
+    assert [row[:7] for row in by_count] == [
+        ["4", "cubic", "10", "10", "10", "100.0", "100.0"],
+        ["4", "ocp", "10", "10", "10", "100.0", "100.0"],
+        ["5", "cubic", "10", "10", "10", "100.0", "100.0"],
+        ["5", "ocp", "10", "10", "10", "100.0", "100.0"],
+        ["6", "cubic", "10", "10", "10", "100.0", "100.0"],
+        ["6", "ocp", "10", "0", "0", "0.0", "0.0"],
+    ]
+    by_tolerance = _section(summary, "Medians by limits.contour_tolerance_mm")
+    assert len(by_tolerance) == 5 * 2 and by_tolerance[0][0].startswith("0.05–")
+
+
+def test_the_rates_figure_draws_the_rates_it_is_given() -> None:
+    rates = {
+        "flap_landmarks": pd.DataFrame(
+            {
+                "group": ["4", "4", "6", "6"],
+                "planner": ["a", "b", "a", "b"],
+                "planned_rate": [1.0, 0.5, 1.0, 0.0],
+                "clean_rate": [0.9, 0.5, 0.8, 0.0],
+            }
+        ),
+        "limits.max_tool_speed_mm_s": pd.DataFrame(
+            {
+                "group": ["2–3", "3–4"],
+                "planner": ["a", "a"],
+                "planned_rate": [1.0, 1.0],
+                "clean_rate": [0.25, 0.75],
+            }
+        ),
+    }
+    figure = results_figures.flap_rates(rates, ["a", "b"], 7, "Varied")
+    first, second = figure.axes
+    assert [t.get_text() for t in first.get_xticklabels()] == ["4", "6"]
+    assert first.get_xlabel() == "flap_landmarks" and second.get_xlabel().startswith("limits.")
+    clean_b = [line for line in first.lines if line.get_label() == "b"][0]
+    np.testing.assert_array_equal(clean_b.get_ydata(), [50.0, 0.0])
+    assert len(second.lines) == 2  # planner b has no group there: nothing drawn
+    assert "7 generated bone flaps" in figure.texts[0].get_text()
 
 
 def test_many_values_are_binned(tmp_path: Path) -> None:

@@ -7,9 +7,11 @@ import math
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import spm_opt as so
+from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION
 from spm_opt.sweep.spec import load_sweep_spec
 from spm_opt.sweep.task import ProblemFiles, _anchor_plan, code_identity, run_task
 
@@ -31,6 +33,22 @@ samples = 2
 seed = 5
 [random.ranges]
 "robot.payload.mass_kg" = [0.0, 0.5]
+'''
+
+
+FLAPS = f'''
+name = "varied"
+problem = "{PROBLEM}"
+planners = ["cubic"]
+
+[flaps]
+count = 12
+seed = 3
+size_mm = [20.0, 50.0]
+landmarks = [4, 6]
+contour_tolerance_mm = [0.05, 0.2]
+max_tool_speed_mm_s = [2.0, 4.0]
+tool_speed_mm_s = 2.0
 '''
 
 
@@ -81,6 +99,181 @@ def test_an_impossible_task_is_a_row_not_an_exception(tmp_path, planner):
 def test_shipped_grid_sweeps_expand(name):
     spec = load_sweep_spec(SWEEPS / f"{name}.toml")
     assert spec.tasks() and spec.name == name
+
+
+def test_drawn_flap_values_are_parameters_and_overrides(tmp_path):
+    tasks = load_sweep_spec(write(tmp_path, FLAPS)).tasks()
+    assert len(tasks) == 12 and [t.parameters["flap"] for t in tasks] == list(range(12))
+    for task in tasks:
+        parameters, overrides = task.parameters, task.overrides
+        assert set(parameters) == {
+            "flap",
+            "flap_size_mm",
+            "flap_landmarks",
+            "limits.contour_tolerance_mm",
+            "limits.max_tool_speed_mm_s",
+        }
+        assert len(overrides["landmarks"]) == parameters["flap_landmarks"]
+        tolerance = parameters["limits.contour_tolerance_mm"]
+        limit = parameters["limits.max_tool_speed_mm_s"]
+        assert 0.05 <= tolerance <= 0.2 and 2.0 <= limit <= 4.0
+        assert overrides["limits.contour_tolerance_mm"] == tolerance
+        assert overrides["limits.max_tool_speed_mm_s"] == limit
+        problem = so.load_problem(PROBLEM, overrides)
+        assert problem.limits.contour_tolerance == pytest.approx(tolerance * 1e-3)
+        assert problem.limits.max_tool_speed == pytest.approx(limit * 1e-3)
+        # mean tool speed of the durations: 2 mm/s, at most 2/3 of the limit (rounding the
+        # durations up to 0.1 s only slows it)
+        mean = problem.contour.length * 1e3 / problem.segment_durations.sum()
+        assert mean <= min(2.0, DURATION_SPEED_FRACTION * limit) + 1e-9
+        assert task.anchor is None  # the flap's limits are part of the cut
+    assert {t.parameters["flap_landmarks"] for t in tasks} == {4, 5, 6}
+    again = load_sweep_spec(write(tmp_path, FLAPS)).tasks()
+    assert [t.key for t in again] == [t.key for t in tasks]
+
+
+def test_fixed_landmarks_and_no_limits_add_no_parameters(tmp_path):
+    text = FLAPS.replace("landmarks = [4, 6]", "landmarks = 5")
+    text = "\n".join(line for line in text.splitlines() if "_mm = [0.05" not in line)
+    text = text.replace("max_tool_speed_mm_s = [2.0, 4.0]\n", "")
+    tasks = load_sweep_spec(write(tmp_path, text)).tasks()
+    assert all(set(t.parameters) == {"flap", "flap_size_mm"} for t in tasks)
+    assert all(set(t.overrides) == {"landmarks", "segment_durations_s"} for t in tasks)
+    assert all(len(t.overrides["landmarks"]) == 5 for t in tasks)
+
+
+def test_the_shipped_flap_sweep_draws_the_flaps_it_drew_before():
+    """random_flaps.toml's flaps, positions (mm), sizes (mm) and segment durations (s), as
+    the generator drew them before it learnt landmark ranges and drawn limits."""
+    spec = load_sweep_spec(SWEEPS / "random_flaps.toml")
+    sets = spec.parameter_sets(so.load_problem(spec.problem_path))
+    assert len(sets) == 200
+    assert all(set(parameters) == {"flap", "flap_size_mm"} for parameters, _, _ in sets)
+    pinned = {
+        0: (
+            25.368044410263085,
+            [[-3.92, -22.12, 66.96], [-5.24, -6.05, 70.17], [-22.01, -7.21, 66.72]]
+            + [[-17.79, -26.85, 62.86]],
+            [8.3, 8.7, 10.3, 7.7],
+        ),
+        1: (
+            42.5819629123726,
+            [[-31.91, 50.79, 36.26], [-48.46, 31.85, 39.35], [-35.11, 14.81, 58.82]]
+            + [[-13.36, 33.63, 60.02]],
+            [12.8, 14.7, 14.5, 17.6],
+        ),
+        199: (
+            36.10772665523108,
+            [[54.74, 11.42, 40.58], [50.18, 32.34, 34.78], [34.04, 37.87, 46.7]]
+            + [[30.44, 15.67, 60.01]],
+            [11.2, 10.5, 13.2, 15.9],
+        ),
+    }
+    for index, (size_mm, positions_mm, durations_s) in pinned.items():
+        parameters, overrides, cut = sets[index]
+        assert parameters == {"flap": index, "flap_size_mm": size_mm}
+        assert [t["position_mm"] for t in overrides["landmarks"]] == positions_mm
+        assert overrides["segment_durations_s"] == durations_s
+        assert set(overrides) == {"landmarks", "segment_durations_s"} and cut == overrides
+
+
+def test_the_shipped_varied_flap_sweep_expands():
+    spec = load_sweep_spec(SWEEPS / "random_flaps_varied.toml")
+    assert spec.planners == ("toppra", "ocp-min-time", "ocp-min-energy", "ocp-min-jerk")
+    sets = spec.parameter_sets(so.load_problem(spec.problem_path))
+    assert len(sets) == 200
+    table = np.array(
+        [
+            [
+                p["flap_landmarks"],
+                p["limits.contour_tolerance_mm"],
+                p["limits.max_tool_speed_mm_s"],
+            ]
+            for p, _, _ in sets
+        ]
+    )
+    assert set(table[:, 0]) == {4, 5, 6}
+    assert table[:, 1].min() >= 0.05 and table[:, 1].max() <= 0.2
+    assert table[:, 2].min() >= 2.0 and table[:, 2].max() <= 4.0
+    assert "ocp-min-energy" in load_sweep_spec(SWEEPS / "random_flaps.toml").planners
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (("landmarks = [4, 6]", "landmarks = [2, 6]"), "flaps.landmarks = [2, 6]: expected"),
+        (("landmarks = [4, 6]", "landmarks = [6, 4]"), "flaps.landmarks = [6, 4]: expected"),
+        (("landmarks = [4, 6]", "landmarks = [4, 13]"), "flaps.landmarks = [4, 13]: expected"),
+        (("landmarks = [4, 6]", "landmarks = [4.5, 6]"), "flaps.landmarks = [4.5, 6]: expec"),
+        (("landmarks = [4, 6]", "landmarks = [4]"), "flaps.landmarks = [4]: expected"),
+        (("landmarks = [4, 6]", "landmarks = [4, 5, 6]"), "flaps.landmarks = [4, 5, 6]: exp"),
+        (("landmarks = [4, 6]", "landmarks = 2"), "flaps.landmarks = 2: expected"),
+        (("landmarks = [4, 6]", "landmarks = 13"), "flaps.landmarks = 13: expected"),
+        (("landmarks = [4, 6]", "landmarks = 4.5"), "flaps.landmarks = 4.5: expected"),
+        (("landmarks = [4, 6]", 'landmarks = "4"'), "flaps.landmarks = '4': expected"),
+        (("landmarks = [4, 6]", "landmarks = true"), "flaps.landmarks = True: expected"),
+        (("landmarks = [4, 6]", "landmarks = inf"), "flaps.landmarks = inf: expected"),
+        (("[0.05, 0.2]", "[0.0, 0.2]"), "flaps.contour_tolerance_mm = [0.0, 0.2]: expected"),
+        (("[0.05, 0.2]", "[-0.1, 0.2]"), "flaps.contour_tolerance_mm = [-0.1, 0.2]: expected"),
+        (("[0.05, 0.2]", "[0.2, 0.05]"), "flaps.contour_tolerance_mm = [0.2, 0.05]: expected"),
+        (("[0.05, 0.2]", "[0.05]"), "flaps.contour_tolerance_mm = [0.05]: expected"),
+        (("[0.05, 0.2]", "0.1"), "flaps.contour_tolerance_mm = 0.1: expected"),
+        (("[0.05, 0.2]", "[0.05, nan]"), "flaps.contour_tolerance_mm = [0.05, nan]: expected"),
+        (("[2.0, 4.0]", "[0.0, 4.0]"), "flaps.max_tool_speed_mm_s = [0.0, 4.0]: expected"),
+        (("[2.0, 4.0]", "[4.0, 2.0]"), "flaps.max_tool_speed_mm_s = [4.0, 2.0]: expected"),
+        (("[2.0, 4.0]", '["2", "4"]'), "flaps.max_tool_speed_mm_s = ['2', '4']: expected"),
+        (
+            ("contour_tolerance_mm = [", "contour_tolerance = ["),
+            "flaps.contour_tolerance: unknown key; did you mean 'contour_tolerance_mm'?",
+        ),
+        (
+            ("[flaps]", '[grid]\n"limits.max_tool_speed_mm_s" = [2.0, 3.0]\n[flaps]'),
+            "flaps.max_tool_speed_mm_s = [2.0, 4.0]: limits.max_tool_speed_mm_s is already an "
+            "axis of [grid] or [random]",
+        ),
+        (
+            (
+                "[flaps]",
+                '[random]\nsamples = 2\n[random.ranges]\n"limits.contour_tolerance_mm"'
+                " = [0.05, 0.1]\n[flaps]",
+            ),
+            "flaps.contour_tolerance_mm = [0.05, 0.2]: limits.contour_tolerance_mm is already",
+        ),
+    ],
+    ids=[
+        "landmarks-too-few",
+        "landmarks-reversed",
+        "landmarks-too-many",
+        "landmarks-fraction-in-range",
+        "landmarks-one-bound",
+        "landmarks-three-bounds",
+        "landmarks-2",
+        "landmarks-13",
+        "landmarks-fraction",
+        "landmarks-text",
+        "landmarks-boolean",
+        "landmarks-infinite",
+        "tolerance-zero",
+        "tolerance-negative",
+        "tolerance-reversed",
+        "tolerance-one-bound",
+        "tolerance-scalar",
+        "tolerance-nan",
+        "speed-zero",
+        "speed-reversed",
+        "speed-text",
+        "tolerance-typo",
+        "speed-also-in-grid",
+        "tolerance-also-random",
+    ],
+)
+def test_bad_flap_tables_are_one_line_errors(tmp_path, edit, expected):
+    old, new = edit
+    assert old in FLAPS
+    with pytest.raises(so.InputError) as caught:
+        load_sweep_spec(write(tmp_path, FLAPS.replace(old, new, 1)))
+    message = str(caught.value)
+    assert expected in message and "\n" not in message
 
 
 @pytest.mark.parametrize(

@@ -230,7 +230,9 @@ def sweep_figures(
         against it); ``heatmap_<planner>_<metric>.png`` for each planner and key metric
         when exactly two parameters are swept, each over at most :data:`MAX_LEVELS`
         values; ``flap_robustness.png`` and ``flap_histograms.png`` when the sweep has
-        generated flaps. Names are filesystem-safe (:func:`safe_name`).
+        generated flaps, and ``flap_robustness_by_parameter.png`` (the rates per value or
+        bin of each swept parameter: flap size, landmark count, drawn limits) when it also
+        sweeps a parameter. Names are filesystem-safe (:func:`safe_name`).
     """
     metrics = shown_metrics(data)
     swept = swept_parameters(data, parameters)
@@ -248,6 +250,10 @@ def sweep_figures(
     if FLAP in parameters:
         table = robustness(data, [planner_order(data)], [])
         yield "flap_robustness.png", draw.flap_robustness(table, data[FLAP].nunique(), name)
+        if swept:
+            rates = {parameter: _rates(data, parameter) for parameter in swept}
+            figure = draw.flap_rates(rates, planners, data[FLAP].nunique(), name)
+            yield "flap_robustness_by_parameter.png", figure
         if metrics:
             points = data.loc[data["status"] != "failed", ["planner", *metrics]]
             yield "flap_histograms.png", draw.histograms(points, planners, name)
@@ -275,6 +281,16 @@ def _against(data: pd.DataFrame, parameter: str, metrics: Sequence[str], name: s
         name,
         level.nunique() if binned else None,
     )
+
+
+def _rates(data: pd.DataFrame, parameter: str) -> pd.DataFrame:
+    """Per group of ``parameter`` (value or quantile bin) and planner, in the groups' order:
+    columns ``group`` (its label), ``planner``, ``tasks``, ``planned``, ``clean`` (counts),
+    ``planned_rate`` and ``clean_rate`` (fractions)."""
+    level = groups(data[parameter]).rename("group")
+    table = robustness(data, [level, planner_order(data)], []).reset_index()
+    table["group"] = [level_label(value) for value in table["group"]]
+    return table
 
 
 def _cells(data: pd.DataFrame, grid: tuple[str, str], metric: str) -> pd.DataFrame:

@@ -1,13 +1,14 @@
 """A sweep's figures, drawn from the tables :mod:`spm_opt.sweep.results` computes: the key
 metrics against a swept parameter, heat maps of a two-parameter grid, and for bone-flap
-sweeps the planners' robustness and the spread of their metrics. One colour per planner,
+sweeps the planners' robustness (overall and per swept parameter) and the spread of their
+metrics. One colour per planner,
 in the order of the ``planners`` given. Each function takes data and returns a figure;
 none computes a statistic of its own."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -188,6 +189,48 @@ def flap_robustness(table: pd.DataFrame, flaps: int, name: str) -> Figure:
     axis.grid(True, axis="y", alpha=0.3)
     axis.legend(fontsize=8, loc="lower right")
     axis.set_title(f"{name}: robustness over {flaps} generated bone flaps", fontsize=10)
+    return figure
+
+
+def flap_rates(
+    rates: Mapping[str, pd.DataFrame], planners: Sequence[str], flaps: int, name: str
+) -> Figure:
+    """A panel per parameter: each planner's share of tasks clean (solid) and planned
+    (dashed), %, per value or bin of the parameter.
+
+    Parameters
+    ----------
+    rates : mapping of str to pandas.DataFrame
+        Per parameter, a row per group and planner, in the groups' order: columns
+        ``group`` (the group's label), ``planner``, ``planned_rate`` and ``clean_rate``
+        (fractions).
+    planners : sequence of str
+        Every planner of the sweep, in the order of their colours.
+    flaps : int
+        The number of flaps, for the title.
+    name : str
+        The sweep's name, for the title.
+    """
+    figure = _figure((4.2 * min(4, len(rates)), 3.6 * math.ceil(len(rates) / 4)))
+    axes = _panels(figure, len(rates), 4)
+    for axis, (parameter, table) in zip(axes, rates.items(), strict=True):
+        labels = list(dict.fromkeys(table["group"]))
+        at = {label: k for k, label in enumerate(labels)}
+        for index, planner in enumerate(planners):
+            mine = table[table["planner"] == planner]
+            if mine.empty:  # none of its tasks has the parameter
+                continue
+            x = [at[label] for label in mine["group"]]
+            colour = _colour(index)
+            axis.plot(x, 100 * mine["clean_rate"], "o-", color=colour, ms=4, label=planner)
+            axis.plot(x, 100 * mine["planned_rate"], "--", color=colour)
+        axis.set_xticks(range(len(labels)), labels, rotation=30 if len(labels) > 4 else 0)
+        axis.set_xlabel(parameter)
+        axis.set_ylim(-5, 105)
+        axis.grid(True, alpha=0.3)
+    axes[0].set_ylabel("tasks clean (solid), planned (dashed), %")
+    axes[0].legend(fontsize=8)
+    figure.suptitle(f"{name}: robustness over {flaps} generated bone flaps, per parameter")
     return figure
 
 

@@ -18,14 +18,27 @@
     count = 200
     seed = 7
     size_mm = [20.0, 50.0]
-    landmarks = 4
+    landmarks = 4                                     # or [low, high], drawn per flap
     tool_speed_mm_s = 2.0                             # sets each flap's segment durations
+    contour_tolerance_mm = [0.05, 0.2]                # optional: drawn per flap
+    max_tool_speed_mm_s = [2.0, 4.0]                  # optional: drawn per flap
 
 Keys are those of the problem file, in its units, with ``robot.`` before the robot file's
 (see :func:`spm_opt.problem.load_problem`). The tasks are every grid combination × every
 random sample × every flap × every planner. Every axis is checked when the file is read:
 an unknown key, an empty axis, a value the problem would refuse or a bad range is a
 one-line error naming it.
+
+``[flaps]`` (:func:`spm_opt.sweep.flaps.random_flaps`): ``landmarks`` is a count of 3 to
+12, or an inclusive range of them each flap draws its count from; ``contour_tolerance_mm``
+and ``max_tool_speed_mm_s``, ranges ``[low, high]`` with ``0 < low <= high``, draw each
+flap's ``limits.`` value (the tolerance log-uniformly), which may then not be an axis of
+``[grid]`` or ``[random]``. Each flap's segment durations give a mean tool speed of
+``tool_speed_mm_s``, at most 2/3 of a drawn tool-speed limit
+(:data:`~spm_opt.sweep.flaps.DURATION_SPEED_FRACTION`). A task's parameters hold the flap's
+index (``flap``), its size (``flap_size_mm``) and every drawn value: ``flap_landmarks``,
+``limits.contour_tolerance_mm``, ``limits.max_tool_speed_mm_s``. The seed draws the same
+flaps whichever of these keys are given.
 """
 
 from __future__ import annotations
@@ -61,15 +74,53 @@ class RandomAxes:
         ]
 
 
+FLAP_LIMITS = {
+    "contour_tolerance_mm": "limits.contour_tolerance_mm",
+    "max_tool_speed_mm_s": "limits.max_tool_speed_mm_s",
+}
+"""The ``[flaps]`` keys that draw a limit per flap, and the problem's key each sets."""
+LANDMARKS = (3, 12)
+"""The fewest and the most landmarks a ``[flaps]`` table may ask for."""
+
+
 @dataclass(frozen=True)
 class FlapAxis:
-    """``count`` random bone flaps (:func:`spm_opt.sweep.flaps.random_flaps`)."""
+    """``count`` random bone flaps (:func:`spm_opt.sweep.flaps.random_flaps`): sizes in mm,
+    mean tool speed in mm/s, the ranges of the drawn limits in mm and mm/s (None: the base
+    problem's limit)."""
 
     count: int
     seed: int
     size_range_mm: tuple[float, float]
-    landmarks: int
+    landmarks: int | tuple[int, int]
     tool_speed_mm_s: float
+    contour_tolerance_mm: tuple[float, float] | None = None
+    max_tool_speed_mm_s: tuple[float, float] | None = None
+
+    def sets(self, problem: Problem) -> list[tuple[dict[str, Any], dict[str, Any]]]:
+        """Per flap, (parameters, overrides): its index, size and drawn values (see the
+        module's docstring); its landmarks, segment durations and drawn limits."""
+        from spm_opt.sweep.flaps import random_flaps
+
+        flaps = random_flaps(
+            problem,
+            self.count,
+            self.size_range_mm,
+            self.landmarks,
+            self.seed,
+            contour_tolerance_mm=self.contour_tolerance_mm,
+            max_tool_speed_mm_s=self.max_tool_speed_mm_s,
+        )
+        sets = []
+        for index, flap in enumerate(flaps):
+            parameters: dict[str, Any] = {"flap": index, "flap_size_mm": flap.size_mm}
+            if isinstance(self.landmarks, tuple):
+                parameters["flap_landmarks"] = len(flap.names)
+            durations = flap.segment_durations_s(flap.mean_speed_mm_s(self.tool_speed_mm_s))
+            overrides = {"landmarks": flap.landmark_overrides(), "segment_durations_s": durations}
+            limits = flap.limit_overrides()
+            sets.append(({**parameters, **limits}, {**overrides, **limits}))
+        return sets
 
 
 @dataclass(frozen=True)
@@ -96,23 +147,7 @@ class SweepSpec:
             for values in itertools.product(*(self.grid[key] for key in keys))
         ]
         draws = self.random.draws() if self.random else [{}]
-        flaps: list[tuple[dict[str, Any], dict[str, Any]]] = [({}, {})]
-        if self.flaps is not None:
-            from spm_opt.sweep.flaps import random_flaps
-
-            f = self.flaps
-            flaps = [
-                (
-                    {"flap": index, "flap_size_mm": flap.size_mm},
-                    {
-                        "landmarks": flap.landmark_overrides(),
-                        "segment_durations_s": flap.segment_durations_s(f.tool_speed_mm_s),
-                    },
-                )
-                for index, flap in enumerate(
-                    random_flaps(problem, f.count, f.size_range_mm, f.landmarks, f.seed)
-                )
-            ]
+        flaps = self.flaps.sets(problem) if self.flaps else [({}, {})]
         sets = []
         for point, draw, (flap_parameters, flap_overrides) in itertools.product(grid, draws, flaps):
             parameters = {**point, **draw, **flap_parameters}
@@ -167,7 +202,8 @@ def load_sweep_spec(path: str | Path) -> SweepSpec:
         )
     grid = _grid(root.table("grid", required=False), problem_path)
     random = _random(root.table("random", required=False), problem_path, grid)
-    flaps = _flaps(root.table("flaps", required=False))
+    axes = {*grid, *(random.ranges if random else {})}
+    flaps = _flaps(root.table("flaps", required=False), axes)
     root.finish()
     return SweepSpec(name, description, problem_path, tuple(planners), grid, random, flaps, path)
 
@@ -221,18 +257,55 @@ def _random(table: Table, problem_path: Path, grid: dict[str, list[Any]]) -> Ran
     return RandomAxes(samples, seed, ranges)
 
 
-def _flaps(table: Table) -> FlapAxis | None:
+def _flaps(table: Table, axes: set[str]) -> FlapAxis | None:
+    """The ``[flaps]`` table; ``axes`` are the keys ``[grid]`` and ``[random]`` sweep."""
     if not table.keys():
         return None
     count = _integer(table, "count", 1, 100_000)
     seed = _integer(table, "seed", 0, 2**32 - 1, default=0)
-    low, high = table.vector("size_mm", length=2, minimum=0.0, exclusive_minimum=True)
-    if not low <= high:
-        raise table.error("size_mm", [low, high], "expected [low, high] with low <= high")
-    landmarks = _integer(table, "landmarks", 3, 12, default=4)
+    size_range = _range(table, "size_mm")
+    landmarks = _landmarks(table)
     speed = table.number("tool_speed_mm_s", default=2.0, minimum=0.0, exclusive_minimum=True)
+    limits: dict[str, tuple[float, float] | None] = {}
+    for key, problem_key in FLAP_LIMITS.items():
+        limits[key] = _range(table, key, required=False)
+        if limits[key] is not None and problem_key in axes:
+            raise table.error(
+                key, list(limits[key]), f"{problem_key} is already an axis of [grid] or [random]"
+            )
     table.finish()
-    return FlapAxis(count, seed, (float(low), float(high)), landmarks, float(speed))
+    return FlapAxis(count, seed, size_range, landmarks, float(speed), **limits)
+
+
+def _range(table: Table, key: str, required: bool = True) -> tuple[float, float] | None:
+    """``key = [low, high]``, both positive, ``low <= high``; None if absent and not
+    ``required`` (the key still taken: an unknown key's error suggests it)."""
+    if not required and table.raw(key, default=None) is None:
+        return None
+    low, high = (float(v) for v in table.vector(key, length=2, minimum=0.0, exclusive_minimum=True))
+    if not low <= high:
+        raise table.error(key, [low, high], "expected [low, high] with low <= high")
+    return low, high
+
+
+def _landmarks(table: Table) -> int | tuple[int, int]:
+    """``landmarks``: a count in :data:`LANDMARKS` (default 4), or ``[low, high]`` of them."""
+    value = table.raw("landmarks", default=4)
+    bounds = value if isinstance(value, list) else [value, value]
+    fewest, most = LANDMARKS
+    whole = all(
+        isinstance(v, int | float) and not isinstance(v, bool) and float(v).is_integer()
+        for v in bounds
+    )
+    if len(bounds) != 2 or not whole or not fewest <= bounds[0] <= bounds[1] <= most:
+        raise table.error(
+            "landmarks",
+            value,
+            f"expected a whole number in [{fewest}, {most}], or [low, high] of them with "
+            "low <= high",
+        )
+    low, high = int(bounds[0]), int(bounds[1])
+    return (low, high) if isinstance(value, list) else low
 
 
 def _integer(table: Table, key: str, low: int, high: int, default: int | None = None) -> int:
