@@ -185,6 +185,31 @@ SHOWN = (
 """The columns comparison.md shows, in its order (comparison.csv has every column)."""
 
 
+SAME_DURATION_S = 1e-3
+"""Plans whose durations differ by less than this, s, share a duration."""
+
+
+def _shared_durations(outcomes: Sequence[Outcome]) -> list[str]:
+    """Which plans share a duration (compare effort or smoothness only among those)."""
+    groups: list[tuple[float, list[str]]] = []
+    for outcome in outcomes:
+        if outcome.trajectory is None:
+            continue
+        duration = outcome.trajectory.duration
+        group = next((g for g in groups if abs(g[0] - duration) < SAME_DURATION_S), None)
+        if group is None:
+            groups.append((duration, [outcome.planner]))
+        else:
+            group[1].append(outcome.planner)
+    shared = [f"{', '.join(names)} ({d:.2f} s)" for d, names in groups if len(names) > 1]
+    if not shared:
+        return ["No two plans share a duration (∫τᵀτ dt and ∫jerk² dt depend on it)."]
+    return [
+        "Plans that share a duration (∫τᵀτ dt and ∫jerk² dt compare fairly only among "
+        f"them): {'; '.join(shared)}."
+    ]
+
+
 def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
     """The problem and its limits, the table, then each planner's violations or error."""
     report = next((o.report for o in outcomes if o.report is not None), None)
@@ -214,6 +239,7 @@ def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
         [COLUMN[name].heading for name in SHOWN],
         [[COLUMN[name].show(row[name]) for name in SHOWN] for row in rows],
     )
+    lines += ["", *_shared_durations(outcomes)]
     lines += ["", "## Violations and failures", ""]
     for outcome in outcomes:
         if outcome.error:

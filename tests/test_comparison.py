@@ -135,3 +135,20 @@ def test_every_experiment_script_runs(tmp_path, command):
             "fig20_torque_theta2.png",
             "fig25_motion_capture.png",
         }
+
+
+def test_the_summary_says_which_plans_share_a_duration(paper_problem):
+    """cubic and a copy of it share 40 s; toppra's time-optimal plan is shorter."""
+    from spm_opt.comparison import Outcome, comparison_markdown
+
+    cubic = so.plan(paper_problem, "cubic")
+    toppra = so.plan(paper_problem, "toppra")
+    outcomes = [
+        Outcome("cubic", 0.0, cubic, so.evaluate(paper_problem, cubic)),
+        Outcome("again", 0.0, cubic, so.evaluate(paper_problem, cubic)),
+        Outcome("toppra", 0.0, toppra, so.evaluate(paper_problem, toppra)),
+    ]
+    text = comparison_markdown(paper_problem, outcomes)
+    assert "Plans that share a duration" in text
+    assert "cubic, again (40.00 s)" in text
+    assert "toppra (" not in text

@@ -1,6 +1,8 @@
 """CasADi functions compiled for batches: the same numbers as CasADi, a cache on disk, and
 the interpreter when no compiler works."""
 
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -52,3 +54,18 @@ def test_wrong_shape_is_refused(cache):
 def test_no_compiler_means_the_interpreter(cache, monkeypatch):
     monkeypatch.setenv("CC", str(cache / "no-such-compiler"))
     assert compiled.compile_batch(quadratic()) is None
+
+
+def test_failed_build_raises_and_leaves_nothing(cache):
+    source = cache / "broken.c"
+    source.write_text("this is not C\n")
+    library = cache / "lib" / "broken.so"
+    with pytest.raises(OSError, match="could not compile broken.c"):
+        compiled.build_library(compiled.compiler(), source, library, ("-shared",))
+    assert not list(library.parent.iterdir())
+
+
+def test_cache_directory_comes_from_the_environment(cache, monkeypatch):
+    assert compiled.cache_directory() == cache
+    monkeypatch.delenv(compiled.CACHE_ENV)
+    assert compiled.cache_directory() == Path.home() / ".cache" / "spm_opt"

@@ -76,7 +76,7 @@ def test_an_acceptable_level_stop_that_cannot_be_made_strict_is_an_error(
     from spm_opt.planners import ocp
 
     monkeypatch.setitem(ocp._WARM_START, "max_iter", 1)
-    monkeypatch.setattr(ocp, "_nlp", ocp._nlp.__wrapped__)  # no cached solver without it
+    monkeypatch.setattr(ocp, "_solver", ocp._solver.__wrapped__)  # no cached solver without it
     problem = dataclasses.replace(
         paper_problem, planner_options={"ocp-min-time": {"acceptable_iterations": 1}}
     )
@@ -183,12 +183,17 @@ def min_energy(paper_problem):
 
 
 @pytest.mark.slow
-def test_min_energy_beats_the_baseline_on_its_own_objective(paper_problem, baseline, min_energy):
-    """At the paper's 40 s, inside every limit the baseline breaks, with less ∫τᵀτ dt."""
+def test_min_energy_beats_the_others_on_its_own_objective(
+    paper_problem, baseline, min_energy, min_time
+):
+    """Within the paper's 40 s (its duration free up to the problem's total) and inside
+    every limit the baseline breaks, with less ∫τᵀτ dt than the baseline and than the
+    minimum-time plan (gravity holding dominates: a shorter cut costs less effort)."""
     report = so.evaluate(paper_problem, min_energy)
     assert report.violations == []
-    assert report.duration_s == pytest.approx(40.0)
+    assert report.duration_s <= 40.0 + 1e-9
     assert report.effort_n2m2s < 0.8 * so.evaluate(paper_problem, baseline).effort_n2m2s
+    assert report.effort_n2m2s <= so.evaluate(paper_problem, min_time).effort_n2m2s
 
 
 @pytest.mark.slow

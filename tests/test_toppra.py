@@ -10,6 +10,8 @@ import pytest
 import spm_opt as so
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
+from spm_opt.planners.toppra import time_optimal_guess
+from spm_opt.sweep.flaps import random_flaps
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 SUITE = ("craniotomy_bone_flap", "craniotomy_large_flap", "craniotomy_five_landmarks")
@@ -157,3 +159,87 @@ def test_bad_settings_are_one_line_errors(paper_problem, options, message):
     problem = dataclasses.replace(paper_problem, planner_options={"toppra": options})
     with pytest.raises(so.InputError, match=message):
         so.plan(problem, "toppra")
+
+
+GUESS_DURATION_TOLERANCE = 0.005
+"""Relative difference allowed between the guess's segment durations and the plan's where
+jerk is limited (measured at most 0.25 % on the shipped problems and random flaps: the
+coarse grid's toppra runs a little slower, the window is not rounded to the plan's steps)."""
+GUESS_SPEED_SLACK = 1e-3
+"""Relative excess of the joint speed limit allowed to the guess, which is never measured
+(2e-5 on the hardware problem, where the joint speed binds: what the moving average of
+speeds at a curved bound and the coarse grid add)."""
+
+
+@pytest.fixture(scope="module")
+def paper_guess(paper_problem):
+    return time_optimal_guess(paper_problem)
+
+
+@pytest.fixture(scope="module", params=range(3))
+def flap_problem(request, paper_problem):
+    flap = random_flaps(paper_problem, 3, (20.0, 50.0), 4, seed=5)[request.param]
+    return flap.problem(paper_problem, 2.0)
+
+
+def dense(trajectory, samples=20_001):
+    return np.linspace(0.0, trajectory.duration, samples)
+
+
+def assert_visits_at_rest(problem, guess):
+    """The guess visits every landmark at its claimed time, exactly and at rest."""
+    times = guess.metadata["landmark_times_s"]
+    assert guess.metadata["landmarks"] == problem.visit_names
+    assert times[0] == 0.0 and times[-1] == pytest.approx(guess.duration, abs=1e-12)
+    np.testing.assert_allclose(guess.position(times), problem.waypoint_angles, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(guess.velocity(times), 0.0, atol=1e-12)
+    np.testing.assert_allclose(guess.acceleration(times), 0.0, atol=1e-9)
+
+
+def test_guess_takes_the_plans_landmark_times(paper_problem, paper_plan, paper_guess):
+    np.testing.assert_allclose(
+        np.diff(paper_guess.metadata["landmark_times_s"]),
+        np.diff(paper_plan.metadata["landmark_times_s"]),
+        rtol=GUESS_DURATION_TOLERANCE,
+    )
+
+
+def test_guess_visits_the_landmarks_at_rest(paper_problem, paper_guess):
+    assert_visits_at_rest(paper_problem, paper_guess)
+
+
+def test_guess_on_random_flaps(flap_problem):
+    guess, plan = time_optimal_guess(flap_problem), so.plan(flap_problem, "toppra")
+    np.testing.assert_allclose(
+        np.diff(guess.metadata["landmark_times_s"]),
+        np.diff(plan.metadata["landmark_times_s"]),
+        rtol=GUESS_DURATION_TOLERANCE,
+    )
+    assert_visits_at_rest(flap_problem, guess)
+
+
+def test_guess_keeps_the_joint_speed_where_it_binds(hardware_problem):
+    """The hardware problem limits the joint speed only (and the torque): the guess runs at
+    the speed limit, beyond it by no more than the slack, and visits every landmark at
+    rest."""
+    guess = time_optimal_guess(hardware_problem)
+    peak = np.max(np.abs(guess.velocity(dense(guess))))
+    limit = hardware_problem.limits.max_joint_speed
+    assert 0.99 * limit < peak <= (1.0 + GUESS_SPEED_SLACK) * limit
+    assert_visits_at_rest(hardware_problem, guess)
+
+
+def test_guess_keeps_the_paper_problems_limits(paper_problem, paper_guess):
+    """Joint speed within its slack; the acceleration within the limit and the jerk within
+    the limit's (the window's first estimate suffices here)."""
+    t, limits = dense(paper_guess), paper_problem.limits
+    speed_limit = (1.0 + GUESS_SPEED_SLACK) * limits.max_joint_speed
+    assert np.max(np.abs(paper_guess.velocity(t))) <= speed_limit
+    assert np.max(np.abs(paper_guess.acceleration(t))) <= limits.max_joint_acceleration
+    assert np.max(np.abs(paper_guess.jerk(t))) <= limits.max_joint_jerk
+
+
+def test_guess_refuses_what_the_planner_refuses(paper_problem):
+    problem = with_limits(paper_problem, max_joint_torque=0.05)
+    with pytest.raises(so.PlanningError, match=r"holding the robot still at A2"):
+        time_optimal_guess(problem)

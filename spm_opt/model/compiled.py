@@ -10,6 +10,10 @@ Every input and output is a row-major (N, n) float64 array whose row i is sample
 vector (an input of shape (n, 1) in CasADi); inputs marked shared are one vector for all
 samples. Without a C compiler :func:`compile_batch` returns ``None`` and callers keep
 CasADi's interpreter.
+
+The compiler lookup, the cache directory and the atomic build (:func:`compiler`,
+:func:`cache_directory`, :func:`build_library`) serve :mod:`spm_opt.planners.nlp_library`
+too.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,45 +125,66 @@ def _source(function: ca.Function) -> str:
     )
 
 
-def _compiler() -> str | None:
-    return os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+def compiler() -> str | None:
+    """The C compiler: ``$CC`` (a program name or path) when set, else ``cc`` or ``gcc`` on
+    the PATH; None when there is none (or ``$CC`` names a missing program)."""
+    chosen = os.environ.get("CC")
+    if chosen:
+        return shutil.which(chosen)
+    return shutil.which("cc") or shutil.which("gcc")
 
 
-def _cache_directory() -> Path:
+def cache_directory() -> Path:
+    """Where compiled libraries are kept: ``$SPM_OPT_CACHE``, else ``~/.cache/spm_opt``."""
     return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "spm_opt")
 
 
-def _build(compiler: str, source: Path, library: Path) -> None:
-    """Compile ``source`` into ``library``, with OpenMP when the compiler takes it."""
-    for extra in (["-fopenmp"], []):
-        partial = library.with_suffix(f".{os.getpid()}.tmp")
-        command = [compiler, *FLAGS, *extra, str(source), "-o", str(partial), "-lm"]
-        if subprocess.run(command, capture_output=True, text=True).returncode == 0:
-            os.replace(partial, library)  # atomic: concurrent builders never see half a file
-            return
+def build_library(compiler: str, source: Path, library: Path, flags: Sequence[str]) -> None:
+    """Compile the C file ``source`` into the shared library ``library`` with ``flags``.
+
+    The compiler writes a temporary file of its own next to ``library``, renamed onto it
+    only when complete: concurrent builders (threads or processes) never see half a file,
+    and the last one to finish leaves a valid library. OSError (with the compiler's last
+    message) when it fails.
+    """
+    library.parent.mkdir(parents=True, exist_ok=True)
+    handle, name = tempfile.mkstemp(dir=library.parent, prefix=library.stem, suffix=".tmp")
+    os.close(handle)
+    partial = Path(name)
+    try:
+        command = [compiler, *flags, str(source), "-o", str(partial), "-lm"]
+        run = subprocess.run(command, capture_output=True, text=True)
+        if run.returncode != 0:
+            last = (run.stderr.strip().splitlines() or ["no message"])[-1]
+            raise OSError(f"{compiler} could not compile {source.name}: {last}")
+        os.replace(partial, library)  # atomic
+    finally:
         partial.unlink(missing_ok=True)
-    raise OSError(f"{compiler} could not compile {source}")
+
+
+def _build_batch(compiler: str, code: str, library: Path) -> None:
+    """Compile ``code`` into ``library``, with OpenMP when the compiler takes it."""
+    with tempfile.TemporaryDirectory() as directory:
+        source = Path(directory, library.with_suffix(".c").name)
+        source.write_text(code)
+        try:
+            build_library(compiler, source, library, (*FLAGS, "-fopenmp"))
+        except OSError:
+            build_library(compiler, source, library, FLAGS)
 
 
 def compile_batch(function: ca.Function) -> BatchFunction | None:
     """The function compiled for batches, or None when no C compiler works here."""
-    compiler = _compiler()
-    if compiler is None:
+    chosen = compiler()
+    if chosen is None:
         _LOG.warning("no C compiler: %s runs in CasADi's interpreter", function.name())
         return None
     code = _source(function)
-    key = hashlib.sha256((code + " ".join(FLAGS) + compiler).encode()).hexdigest()[:16]
-    directory = _cache_directory()
-    library = directory / f"{function.name()}_{key}.so"
+    key = hashlib.sha256((code + " ".join(FLAGS) + chosen).encode()).hexdigest()[:16]
+    library = cache_directory() / f"{function.name()}_{key}.so"
     try:
         if not library.exists():
-            directory.mkdir(parents=True, exist_ok=True)
-            source = directory / f"{function.name()}_{key}.{os.getpid()}.c"
-            source.write_text(code)
-            try:
-                _build(compiler, source, library)
-            finally:
-                source.unlink(missing_ok=True)
+            _build_batch(chosen, code, library)
         loaded = ctypes.CDLL(str(library))
     except OSError as error:
         _LOG.warning("%s runs in CasADi's interpreter: %s", function.name(), error)

@@ -48,6 +48,19 @@ from the start.
 Trajectory. The averaged s(t) is one cubic per grid step, so samples at every grid time
 with q, q̇ = q' ṡ and q̈ = q' s̈ + q'' ṡ² carry every knot, and the quintic Hermite pieces
 through them have the motion's jerk. Landmark visits are the segments' ends, at rest.
+
+Guess. :func:`time_optimal_guess` is the start of the minimum-time optimal control, in
+milliseconds: the first toppra run of every segment with the same limits and shares, on a
+coarse grid (``GUESS_GRIDPOINTS`` gridpoints, a path through ``GUESS_PATH_SAMPLES``
+samples; the model evaluated once for all segments), and toppra's own motion (no uniform
+time grid) averaged once over the first window, max(a / j, ``min_smoothing_s``). Left out:
+the rescaling of the window by the measured jerk, the measuring of the smoothed motion and
+the runs with tighter shares, so the guess may exceed a limit by a little (the speeds by
+what the average and the coarse grid add, the jerk by what the window's first estimate
+misses). Its segments start and end at rest and last within 0.5 % of the plan's where the
+jerk is limited; without a jerk limit toppra's ramps last a few ms, which the plan's time
+grid cuts at a cost the guess does not pay (its 0.25 s segments of the hardware problem
+are 0.7–1.4 % shorter than the plan's, within 0.5 % of toppra's on the fine grid).
 """
 
 from __future__ import annotations
@@ -76,6 +89,15 @@ _ATTEMPTS = 4
 """toppra runs per segment, each with tighter shares of the limits the last one exceeded."""
 _SPEED_SLACK = 1e-4
 """Relative excess of a speed limit left to rounding; shares are cut this much below it."""
+GUESS_GRIDPOINTS = 30
+"""toppra's gridpoints per segment in :func:`time_optimal_guess` (the planner's: 800):
+enough to keep the guess's segments within 0.5 % of the plan's (20 are not: 1.2 %)."""
+GUESS_PATH_SAMPLES = 30
+"""Inverse-kinematics samples per segment of the guess's path (the planner's: 100)."""
+_MERGED = 1e-3
+"""Knots of the averaged motion closer than this fraction of the window to the one before
+are not sampled: a sliver between two samples would give the quintic pieces a jerk of
+rounding errors over its length cubed."""
 
 
 @dataclass(frozen=True)
@@ -141,14 +163,20 @@ class _Segment:
         return [self.spline(s, order) for order in range(orders)]
 
 
-def _segment(problem: Problem, index: int, samples: int) -> _Segment:
-    """The path of segment ``index``, through ``samples`` points of its arc."""
-    contour, names = problem.contour, problem.visit_names
-    start, end = contour.landmark_arc_lengths[index : index + 2]
-    s = np.linspace(0.0, end - start, samples)
-    q = problem.contour_angles(start + s)
-    q[0], q[-1] = problem.waypoint_angles[index], problem.waypoint_angles[index + 1]
-    return _Segment(f"{names[index]}→{names[index + 1]}", CubicSpline(s / MM, q))
+def _segments(problem: Problem, samples: int) -> list[_Segment]:
+    """Every segment's path, each through ``samples`` points of its arc (their inverse
+    kinematics in one call)."""
+    names, angles = problem.visit_names, problem.waypoint_angles
+    ends = problem.contour.landmark_arc_lengths
+    count = len(problem.segment_durations)
+    s = [np.linspace(0.0, ends[k + 1] - ends[k], samples) for k in range(count)]
+    arc = np.concatenate([ends[k] + s[k] for k in range(count)])
+    q = np.split(problem.contour_angles(arc), count)
+    for k in range(count):
+        q[k][0], q[k][-1] = angles[k], angles[k + 1]
+    return [
+        _Segment(f"{names[k]}→{names[k + 1]}", CubicSpline(s[k] / MM, q[k])) for k in range(count)
+    ]
 
 
 def _gridpoints(length: float, count: int) -> np.ndarray:
@@ -208,6 +236,53 @@ class _Constraints:
         ]
 
 
+@dataclass(frozen=True)
+class _PathPoints:
+    """The path and the model along it at N points: q (N, 2), rad; q' and q'' (N, 2),
+    rad/mm and rad/mm²; the inertia M + J (N, 2, 2), kg·m²; the Coriolis and centrifugal
+    torque h(q, q') (N, 2) per unit ṡ², N·m·s²/mm²; gravity g(q) and friction f(q, q')
+    (N, 2), N·m (see the module docstring)."""
+
+    q: np.ndarray
+    dq: np.ndarray
+    ddq: np.ndarray
+    inertia: np.ndarray
+    bias: np.ndarray
+    gravity: np.ndarray
+    friction: np.ndarray
+
+    def __getitem__(self, index: slice) -> _PathPoints:
+        """The points ``index`` selects."""
+        return _PathPoints(*(getattr(self, f.name)[index] for f in dataclasses.fields(self)))
+
+
+def _path_points(problem: Problem, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> _PathPoints:
+    """The model's terms at path points q, q', q'' (N, 2): rad, rad/mm, rad/mm². Two
+    evaluations of the model for any N: the frictionless torques at rest, at rest pushed by
+    each unit joint acceleration and moving at q', and the friction moving at q'."""
+    robot, zeros = problem.robot, np.zeros_like(q)
+    push = [np.broadcast_to(unit, q.shape) for unit in np.eye(2)]
+    torques = dynamics.inverse_dynamics(
+        robot,
+        np.tile(q, (4, 1)),
+        np.vstack([zeros, zeros, zeros, dq]),
+        np.vstack([zeros, *push, zeros]),
+        friction=False,
+    )
+    gravity, first, second, moving = np.split(torques, 4)
+    mass = np.stack([first - gravity, second - gravity], axis=-1)
+    rotor = robot.actuator.rotor_inertia_kg_m2
+    return _PathPoints(
+        q,
+        dq,
+        ddq,
+        mass + rotor * np.eye(2),
+        moving - gravity,
+        gravity,
+        dynamics.friction_torque(robot, q, dq),
+    )
+
+
 def _friction_range(friction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least and greatest friction torque (N, 2) over each gridpoint and its neighbours,
     and 0 (at rest) at the two ends."""
@@ -232,23 +307,22 @@ def _speed_bound(problem: Problem, q: np.ndarray, dq: np.ndarray, shares: _Share
 
 def _constraints(
     problem: Problem,
-    segment: _Segment,
-    s: np.ndarray,
+    points: _PathPoints,
+    x_max: np.ndarray,
     acceleration: float | None,
     shares: _Shares,
 ) -> _Constraints:
-    """The limits at gridpoints s (N,), mm, with ``acceleration`` the joint acceleration
-    bound given to toppra, rad/s² (None: unlimited)."""
-    robot, bounds = problem.robot, planner_bounds(problem, 0.0)
-    q, dq, ddq = segment.derivatives(s)
-    inertia = dynamics.mass_matrix(robot, q) + bounds.rotor_inertia * np.eye(2)
-    friction_low, friction_high = _friction_range(dynamics.friction_torque(robot, q, dq))
-    torque = bounds.load_torque * shares.torque
+    """The limits at one segment's gridpoints (``points``), with x_max (N,) their largest
+    ṡ², mm²/s², and ``acceleration`` the joint acceleration bound given to toppra, rad/s²
+    (None: unlimited)."""
+    q, dq, ddq = points.q, points.dq, points.ddq
+    friction_low, friction_high = _friction_range(points.friction)
+    torque = planner_bounds(problem, 0.0).load_torque * shares.torque
     rows = (("actuator 1 torque", "N·m"), ("actuator 2 torque", "N·m"))
     limit = np.full(2, torque)
-    a = np.einsum("nij,nj->ni", inertia, dq)
-    b = np.einsum("nij,nj->ni", inertia, ddq) + dynamics.bias_torque(robot, q, dq)
-    c = dynamics.gravity_torque(robot, q)
+    a = np.einsum("nij,nj->ni", points.inertia, dq)
+    b = np.einsum("nij,nj->ni", points.inertia, ddq) + points.bias
+    c = points.gravity
     low, high = -torque - friction_low, torque - friction_high
     if acceleration is not None:
         rows += (("theta1 acceleration", "rad/s²"), ("theta2 acceleration", "rad/s²"))
@@ -258,7 +332,7 @@ def _constraints(
             np.hstack([low, np.full_like(q, -acceleration)]),
             np.hstack([high, np.full_like(q, acceleration)]),
         )
-    return _Constraints(rows, limit, a, b, c, low, high, _speed_bound(problem, q, dq, shares))
+    return _Constraints(rows, limit, a, b, c, low, high, x_max)
 
 
 @cache
@@ -293,6 +367,14 @@ def _path_limits_class() -> type:
     return PathLimits
 
 
+@dataclass(frozen=True)
+class _Span:
+    """All that toppra's algorithm reads of a path whose constraints come precomputed: the
+    range of its parameter (a spline through the path would only cost its construction)."""
+
+    path_interval: np.ndarray
+
+
 def _check_rest(problem: Problem, segment: int, limits: _Constraints) -> None:
     """Refuse a segment at whose end landmarks the robot cannot be held still (every segment
     starts and ends at rest)."""
@@ -318,12 +400,11 @@ def _parameterise(segment: _Segment, s: np.ndarray, limits: _Constraints) -> np.
     from toppra.algorithm import ParameterizationReturnCode
 
     unit = math.sqrt(float(np.max(limits.x_max)))
-    knots = segment.spline.x
-    path = toppra.SplineInterpolator(knots / unit, segment.spline(knots))
+    gridpoints = s / unit
     instance = toppra.algorithm.TOPPRA(
         [_path_limits_class()(limits.per_unit(unit))],
-        path,
-        gridpoints=s / unit,
+        _Span(gridpoints[[0, -1]]),
+        gridpoints=gridpoints,
         solver_wrapper="seidel",
     )
     _, speed, _, controllable = instance.compute_parameterization(0.0, 0.0, return_data=True)
@@ -349,6 +430,39 @@ def _failure(code: str, segment: _Segment, s: np.ndarray, limits: _Constraints, 
     )
 
 
+def _toppra_steps(s: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """Durations (N - 1,), s, of toppra's steps between gridpoints s (N,), mm, at its path
+    speeds (N,), mm/s (the path acceleration constant on each); a PlanningError where the
+    motion stalls or would last more than ``MAX_DURATION_S``."""
+    durations = 2.0 * np.diff(s) / (speed[:-1] + speed[1:])
+    if not np.all(np.isfinite(durations)):
+        raise PlanningError("toppra: the path speed is zero between two gridpoints")
+    total = float(np.sum(durations))
+    if total > MAX_DURATION_S:
+        raise PlanningError(
+            f"toppra: a segment would last {total:.4g} s, more than {MAX_DURATION_S:g} s; "
+            "are the limits in their units?"
+        )
+    return durations
+
+
+def _path_profile(steps: np.ndarray, speed: np.ndarray, start: np.ndarray, end: float) -> PPoly:
+    """s(t), mm, over consecutive ``steps`` (M,), s, from t = 0: from ``start`` (M,), mm,
+    at each step's start, at path speeds ``speed`` (M + 1,), mm/s, at the steps' ends, with
+    a constant path acceleration on each step. At rest, at 0 before and at ``end``, mm,
+    after (extrapolated so)."""
+    times = np.concatenate([[0.0], np.cumsum(steps)])
+    zero = np.zeros(1)
+    coefficients = np.vstack(
+        [
+            np.concatenate([zero, np.diff(speed) / steps / 2.0, zero]),
+            np.concatenate([zero, speed[:-1], zero]),
+            np.concatenate([zero, start, [end]]),
+        ]
+    )
+    return PPoly(coefficients, np.concatenate([[-1.0], times, [times[-1] + 1.0]]))
+
+
 def _uniform_profile(s: np.ndarray, speed: np.ndarray, step: float) -> PPoly:
     """s(t), mm, on a uniform time grid of about ``step`` s, from toppra's path speeds (N,),
     mm/s, at gridpoints s (N,), mm.
@@ -360,30 +474,25 @@ def _uniform_profile(s: np.ndarray, speed: np.ndarray, step: float) -> PPoly:
     the path's end: the speeds stay toppra's, the accelerations shrink. At rest, and
     extrapolated so, before 0 and after the end.
     """
-    durations = 2.0 * np.diff(s) / (speed[:-1] + speed[1:])
-    if not np.all(np.isfinite(durations)):
-        raise PlanningError("toppra: the path speed is zero between two gridpoints")
-    knots = np.concatenate([[0.0], np.cumsum(durations)])
-    if knots[-1] > MAX_DURATION_S:
-        raise PlanningError(
-            f"toppra: a segment would last {knots[-1]:.4g} s, more than {MAX_DURATION_S:g} s; "
-            "are the limits in their units?"
-        )
+    knots = np.concatenate([[0.0], np.cumsum(_toppra_steps(s, speed))])
     times = np.linspace(0.0, knots[-1], max(1, math.ceil(knots[-1] / step)) + 1)
     rate = np.interp(times, knots, speed)
     rate[[0, -1]] = 0.0
     steps = np.diff(times) * s[-1] / np.trapezoid(rate, times)
     distance = np.concatenate([[0.0], np.cumsum(steps * (rate[:-1] + rate[1:]) / 2.0)])
-    times = np.concatenate([[0.0], np.cumsum(steps)])
-    zero = np.zeros(1)
-    coefficients = np.vstack(
-        [
-            np.concatenate([zero, np.diff(rate) / steps / 2.0, zero]),
-            np.concatenate([zero, rate[:-1], zero]),
-            np.concatenate([zero, distance[:-1], s[-1:]]),
-        ]
-    )
-    return PPoly(coefficients, np.concatenate([[-1.0], times, [times[-1] + 1.0]]))
+    return _path_profile(steps, rate, distance[:-1], float(s[-1]))
+
+
+def _moving_average(profile: PPoly, width: float, t: np.ndarray) -> list[np.ndarray]:
+    """The moving average of s(t) (``profile``, mm) over ``width`` s, s_w(t) = (1/T_w) ∫ s
+    over [t − T_w, t], and its derivatives at times t (N,): s_w, ṡ_w, s̈_w and s⃛_w in mm,
+    mm/s, mm/s², mm/s³."""
+    integral = profile.antiderivative()
+    values = [(integral(t) - integral(t - width)) / width]
+    for order in range(3):
+        derivative = profile.derivative(order) if order else profile
+        values.append((derivative(t) - derivative(t - width)) / width)
+    return values
 
 
 @dataclass(frozen=True)
@@ -407,13 +516,7 @@ class _Averaged:
 
     def __call__(self, t: np.ndarray) -> list[np.ndarray]:
         """s_w, ṡ_w, s̈_w and s⃛_w at times t (N,): mm, mm/s, mm/s², mm/s³."""
-        width = self.window * self.step
-        integral = self.profile.antiderivative()
-        values = [(integral(t) - integral(t - width)) / width]
-        for order in range(3):
-            derivative = self.profile.derivative(order) if order else self.profile
-            values.append((derivative(t) - derivative(t - width)) / width)
-        return values
+        return _moving_average(self.profile, self.window * self.step, t)
 
 
 def _peak_jerk(segment: _Segment, motion: _Averaged) -> float:
@@ -457,18 +560,17 @@ def _smoothed(
 
 
 def _toppra_acceleration(
-    problem: Problem, segment: _Segment, shares: _Shares, jerk: float | None
+    problem: Problem, dq: np.ndarray, x_max: np.ndarray, shares: _Shares, jerk: float | None
 ) -> float | None:
     """The joint acceleration bound, rad/s², given to toppra: the limit, or less where the
     jerk limit (rad/s³, None: unlimited) makes a gentler start faster (a = √(ω_c j), see
-    the module docstring)."""
+    the module docstring), with ω_c from the path tangents q' (2, 2), rad/mm, and the
+    largest ṡ² (2,), mm²/s², at the segment's two ends."""
     limit = problem.limits.max_joint_acceleration
     bound = None if limit is None else limit * shares.acceleration
     if jerk is None:
         return bound
-    ends = np.array([0.0, segment.length])
-    q, dq = segment.derivatives(ends, orders=2)
-    cruise = float(np.max(np.abs(dq) * np.sqrt(_speed_bound(problem, q, dq, shares))[:, None]))
+    cruise = float(np.max(np.abs(dq) * np.sqrt(x_max)[:, None]))
     gentle = math.sqrt(cruise * jerk)
     return gentle if bound is None else min(bound, gentle)
 
@@ -487,26 +589,64 @@ class _Piece:
     runs: int = 1
 
 
-def _attempt(
-    problem: Problem, index: int, segment: _Segment, settings: ToppraSettings, shares: _Shares
-) -> _Piece:
-    """toppra on one segment within ``shares`` of the limits, then smoothed and sampled."""
+def _jerk_bound(problem: Problem, settings: ToppraSettings) -> float | None:
+    """The joint jerk the smoothing keeps within, rad/s³ (None: unlimited)."""
     limit = problem.limits.max_joint_jerk
-    jerk = None if limit is None else limit * (1.0 - settings.margin)
-    s = _gridpoints(segment.length, settings.gridpoints)
-    acceleration = _toppra_acceleration(problem, segment, shares, jerk)
-    limits = _constraints(problem, segment, s, acceleration, shares)
+    return None if limit is None else limit * (1.0 - settings.margin)
+
+
+def _toppra_limits(
+    problem: Problem,
+    index: int,
+    points: _PathPoints,
+    x_max: np.ndarray,
+    shares: _Shares,
+    jerk: float | None,
+) -> tuple[_Constraints, float | None]:
+    """The limits toppra gets on segment ``index`` at its gridpoints (``points``, with
+    their largest ṡ² x_max (N,), mm²/s²), once the robot is known to rest at its ends; and
+    the joint acceleration bound among them, rad/s² (None: unlimited)."""
+    ends = [0, -1]
+    acceleration = _toppra_acceleration(problem, points.dq[ends], x_max[ends], shares, jerk)
+    limits = _constraints(problem, points, x_max, acceleration, shares)
     _check_rest(problem, index, limits)
+    return limits, acceleration
+
+
+def _joint_samples(
+    problem: Problem, index: int, segment: _Segment, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """q, q̇, q̈ (N, 2), SI, along segment ``index`` at path positions s (N,), mm, speeds ṡ
+    (N,), mm/s, and accelerations s̈ (N,), mm/s², from its first landmark to its last, both
+    at rest and exact."""
+    q, dq, ddq = segment.derivatives(s)
+    q[[0, -1]] = problem.waypoint_angles[index : index + 2]
+    qd = dq * sd[:, None]
+    qdd = dq * sdd[:, None] + ddq * sd[:, None] ** 2
+    qd[[0, -1]] = qdd[[0, -1]] = 0.0
+    return q, qd, qdd
+
+
+def _attempt(
+    problem: Problem,
+    index: int,
+    segment: _Segment,
+    s: np.ndarray,
+    points: _PathPoints,
+    settings: ToppraSettings,
+    shares: _Shares,
+) -> _Piece:
+    """toppra on one segment at gridpoints s (N,), mm (``points`` there) within ``shares``
+    of the limits, then smoothed and sampled."""
+    jerk = _jerk_bound(problem, settings)
+    x_max = _speed_bound(problem, points.q, points.dq, shares)
+    limits, acceleration = _toppra_limits(problem, index, points, x_max, shares, jerk)
     profile = _uniform_profile(s, _parameterise(segment, s, limits), settings.time_step_s)
     first = 0.0 if jerk is None or acceleration is None else acceleration / jerk
     motion = _smoothed(segment, profile, first, jerk, settings.min_smoothing_s)
     t = motion.times
     path_s, sd, sdd, _ = motion(t)
-    q, dq, ddq = segment.derivatives(path_s)
-    q[[0, -1]] = problem.waypoint_angles[index : index + 2]
-    qd = dq * sd[:, None]
-    qdd = dq * sdd[:, None] + ddq * sd[:, None] ** 2
-    qd[[0, -1]] = qdd[[0, -1]] = 0.0
+    q, qd, qdd = _joint_samples(problem, index, segment, path_s, sd, sdd)
     return _Piece(t, q, qd, qdd, float(profile.x[-2]), motion.window * motion.step, acceleration)
 
 
@@ -528,14 +668,23 @@ def _excess(problem: Problem, piece: _Piece) -> dict[str, float]:
     return {name: float(peak) for name, (peak, slack) in peaks.items() if peak > 1.0 + slack}
 
 
-def _segment_motion(problem: Problem, index: int, settings: ToppraSettings) -> _Piece:
-    """The segment's motion within every limit: toppra and smoothing, again with tighter
-    shares of whatever limit the smoothed motion still exceeds."""
-    segment = _segment(problem, index, settings.path_samples)
+def _first_shares(settings: ToppraSettings) -> _Shares:
+    """The shares of the limits toppra gets first: the acceleration and torque keep the
+    settings' margin."""
     keep = 1.0 - settings.margin
-    shares = _Shares(acceleration=keep, torque=keep)
+    return _Shares(acceleration=keep, torque=keep)
+
+
+def _segment_motion(
+    problem: Problem, index: int, segment: _Segment, settings: ToppraSettings
+) -> _Piece:
+    """The motion along segment ``index`` within every limit: toppra and smoothing, again
+    with tighter shares of whatever limit the smoothed motion still exceeds."""
+    s = _gridpoints(segment.length, settings.gridpoints)
+    points = _path_points(problem, *segment.derivatives(s))
+    shares = _first_shares(settings)
     for run in range(1, _ATTEMPTS + 1):
-        piece = _attempt(problem, index, segment, settings, shares)
+        piece = _attempt(problem, index, segment, s, points, settings, shares)
         excess = _excess(problem, piece)
         if not excess:
             return dataclasses.replace(piece, runs=run)
@@ -560,6 +709,89 @@ def _chain(
     return np.concatenate(t), q, qd, qdd
 
 
+def time_optimal_guess(problem: Problem) -> Trajectory:
+    """A near-time-optimal motion along the contour, at rest at every landmark, in a few
+    milliseconds: the start for the minimum-time optimal control (see the module docstring,
+    Guess). Its metadata has ``landmark_times_s`` (s), ``landmarks`` and ``statistics``.
+
+    Raises
+    ------
+    PlanningError
+        Where the toppra planner's first run fails (the same messages).
+    """
+    settings = ToppraPlanner().settings(problem)
+    started = time.perf_counter()
+    pieces = _rough_pieces(problem, settings)
+    durations = np.array([piece.t[-1] for piece in pieces])
+    starts = np.concatenate([[0.0], np.cumsum(durations)])
+    samples = _chain(pieces, starts[:-1])
+    statistics = {
+        "solve_time_s": time.perf_counter() - started,
+        "gridpoints": GUESS_GRIDPOINTS,
+        "samples": int(samples[0].size),
+        "segment_durations_s": durations.tolist(),
+        "toppra_durations_s": [piece.toppra_duration for piece in pieces],
+        "smoothing_windows_s": [piece.window for piece in pieces],
+        "toppra_accelerations_rad_s2": [piece.acceleration for piece in pieces],
+    }
+    metadata = {
+        "landmark_times_s": starts.tolist(),
+        "landmarks": problem.visit_names,
+        "statistics": statistics,
+    }
+    return Trajectory.from_samples(*samples, metadata=metadata)
+
+
+def _rough_pieces(problem: Problem, settings: ToppraSettings) -> list[_Piece]:
+    """Every segment's motion for the guess: toppra on the coarse grid within the first
+    shares of the limits, averaged over the first window; the model evaluated once for all
+    segments."""
+    shares, jerk = _first_shares(settings), _jerk_bound(problem, settings)
+    segments = _segments(problem, GUESS_PATH_SAMPLES)
+    grids = [_gridpoints(segment.length, GUESS_GRIDPOINTS) for segment in segments]
+    derivatives = [segment.derivatives(s) for segment, s in zip(segments, grids, strict=True)]
+    points = _path_points(problem, *(np.vstack(order) for order in zip(*derivatives, strict=True)))
+    x_max = _speed_bound(problem, points.q, points.dq, shares)
+    pieces = []
+    for k, (segment, s) in enumerate(zip(segments, grids, strict=True)):
+        part = slice(k * GUESS_GRIDPOINTS, (k + 1) * GUESS_GRIDPOINTS)
+        limits, acceleration = _toppra_limits(problem, k, points[part], x_max[part], shares, jerk)
+        first = 0.0 if jerk is None or acceleration is None else acceleration / jerk
+        width = max(first, settings.min_smoothing_s)
+        pieces.append(_rough_piece(problem, k, segment, s, limits, acceleration, width))
+    return pieces
+
+
+def _rough_piece(
+    problem: Problem,
+    index: int,
+    segment: _Segment,
+    s: np.ndarray,
+    limits: _Constraints,
+    acceleration: float | None,
+    width: float,
+) -> _Piece:
+    """toppra's motion along segment ``index`` at gridpoints s (N,), mm, within ``limits``
+    (``acceleration`` the joint acceleration bound among them, rad/s²), averaged over
+    ``width`` s and sampled at every knot of the average."""
+    speed = _parameterise(segment, s, limits)
+    profile = _path_profile(_toppra_steps(s, speed), speed, s[:-1], float(s[-1]))
+    t = _average_knots(profile.x[1:-1], width)
+    path_s, sd, sdd, _ = _moving_average(profile, width, t)
+    q, qd, qdd = _joint_samples(problem, index, segment, path_s, sd, sdd)
+    return _Piece(t, q, qd, qdd, float(profile.x[-2]), width, acceleration)
+
+
+def _average_knots(knots: np.ndarray, width: float) -> np.ndarray:
+    """The times, s, where the average over ``width`` s of a motion with ``knots`` (M,), s,
+    from 0, changes its cubic: the knots and the knots + width, from 0 to the end, without
+    those within ``_MERGED`` of the width of the one before or of the end."""
+    t = np.sort(np.concatenate([knots, knots + width]))
+    inner = t[1:-1]
+    apart = (inner - t[:-2] > _MERGED * width) & (t[-1] - inner > _MERGED * width)
+    return np.concatenate([t[:1], inner[apart], t[-1:]])
+
+
 class ToppraPlanner:
     """Time-optimal motion along the planned contour, at rest at every landmark, within every
     limit of the problem; see the module docstring."""
@@ -573,7 +805,8 @@ class ToppraPlanner:
         settings = self.settings(problem)
         started = time.perf_counter()
         pieces = [
-            _segment_motion(problem, k, settings) for k in range(len(problem.segment_durations))
+            _segment_motion(problem, k, segment, settings)
+            for k, segment in enumerate(_segments(problem, settings.path_samples))
         ]
         durations = np.array([piece.t[-1] for piece in pieces])
         starts = np.concatenate([[0.0], np.cumsum(durations)])

@@ -1,0 +1,165 @@
+"""NLP solvers on compiled libraries: the interpreter's solution, a cache on disk keyed by
+the formulation, the interpreter when no compiler works, safe concurrent builds."""
+
+import logging
+import multiprocessing
+import os
+import stat
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from spm_opt.model import compiled
+from spm_opt.planners import nlp_library
+from spm_opt.planners.nlp_library import COMPILED, INTERPRETED, LOADED, nlp_solver
+
+OPTIONS = {"ipopt": {"print_level": 0, "sb": "yes"}, "print_time": False, "expand": True}
+ARGUMENTS = {"x0": [0.0, 0.0], "p": [1.0, 100.0], "lbg": -np.inf, "ubg": 1.5}
+ROSENBROCK = (0.907234, 0.822755)  # constrained optimum for p = (1, 100)
+
+
+def rosenbrock() -> dict:
+    """Rosenbrock's function with parameters (a, b), inside the disc x·x ≤ 1.5."""
+    x, p = ca.MX.sym("x", 2), ca.MX.sym("p", 2)
+    f = (p[0] - x[0]) ** 2 + p[1] * (x[1] - x[0] ** 2) ** 2
+    return {"x": x, "p": p, "f": f, "g": ca.dot(x, x)}
+
+
+def unused() -> dict:
+    raise AssertionError("the graph was built although the library is cached")
+
+
+def solve(key: str, build=rosenbrock, **kwargs) -> tuple[nlp_library.Solver, np.ndarray]:
+    solver = nlp_solver("rosenbrock", "ipopt", key, build, OPTIONS, **kwargs)
+    return solver, solver(**ARGUMENTS)["x"].full().ravel()
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv(compiled.CACHE_ENV, str(tmp_path))
+    yield tmp_path
+    nlp_library.wait_for_builds()
+
+
+def failing_compiler(directory) -> str:
+    """A compiler that always fails, with a message."""
+    script = directory / "failing-cc"
+    script.write_text("#!/bin/sh\necho 'fatal: out of luck' >&2\nexit 1\n")
+    script.chmod(script.stat().st_mode | stat.S_IXUSR)
+    return str(script)
+
+
+def test_compiled_solution_is_the_interpreters(cache):
+    interpreted = ca.nlpsol("rosenbrock", "ipopt", rosenbrock(), OPTIONS)(**ARGUMENTS)
+    solver, x = solve("rosenbrock", background=False)
+    assert solver.kind == COMPILED
+    assert solver.library.parent == cache and solver.library.exists()
+    np.testing.assert_allclose(x, interpreted["x"].full().ravel(), rtol=1e-12)
+    np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
+    assert solver.stats()["return_status"] == "Solve_Succeeded"
+
+
+def test_second_call_loads_without_graph_or_compiler(cache, monkeypatch):
+    first, _ = solve("rosenbrock", background=False)
+
+    def no_compiler(*args):
+        raise AssertionError("the compiler ran although the library is cached")
+
+    monkeypatch.setattr(nlp_library, "build_library", no_compiler)
+    second, x = solve("rosenbrock", build=unused)
+    assert second.kind == LOADED and second.library == first.library
+    assert second.seconds < 1.0
+    np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
+
+
+def test_background_build_switches_the_solver_to_the_library(cache):
+    solver, x = solve("rosenbrock")
+    assert solver.kind == INTERPRETED
+    nlp_library.wait_for_builds()
+    assert solver.library.exists()
+    again = solver(**ARGUMENTS)["x"].full().ravel()
+    assert solver.kind == LOADED
+    np.testing.assert_allclose(again, x, rtol=1e-12)
+
+
+def test_key_and_plugin_options_choose_the_library(cache):
+    first, _ = solve("rosenbrock v1", background=False)
+    second, _ = solve("rosenbrock v2", background=False)
+    assert second.kind == COMPILED and second.library != first.library
+    tolerances = {**OPTIONS, "ipopt": {**OPTIONS["ipopt"], "tol": 1e-10}}
+    chosen = compiled.compiler()
+    assert nlp_library.library_path(chosen, "ipopt", "rosenbrock v1", tolerances) == first.library
+    quasi_newton = {**OPTIONS, "ipopt.hessian_approximation": "limited-memory"}
+    assert nlp_library.library_path(chosen, "ipopt", "rosenbrock v1", quasi_newton) != first.library
+    assert len(list(cache.glob("*.so"))) == 2
+
+
+@pytest.mark.parametrize("missing", ["CC", "PATH"])
+def test_no_compiler_means_the_interpreter_and_one_warning(cache, monkeypatch, caplog, missing):
+    if missing == "CC":
+        monkeypatch.setenv("CC", str(cache / "no-such-compiler"))
+    else:
+        monkeypatch.delenv("CC", raising=False)
+        monkeypatch.setenv("PATH", str(cache))
+    with caplog.at_level(logging.WARNING, logger=nlp_library.__name__):
+        solver, x = solve("rosenbrock", background=False)
+    assert solver.kind == INTERPRETED and solver.library is None
+    np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
+    assert [r.message for r in caplog.records] == [
+        "no C compiler: the NLP 'rosenbrock' runs in CasADi's interpreter"
+    ]
+    assert not list(cache.iterdir())
+
+
+def test_failed_build_means_the_interpreter_and_one_warning(cache, monkeypatch, caplog):
+    monkeypatch.setenv("CC", failing_compiler(cache))
+    with caplog.at_level(logging.WARNING, logger=nlp_library.__name__):
+        solver, x = solve("rosenbrock", background=False)
+        again, _ = solve("rosenbrock", background=False)  # built once per process
+    assert solver.kind == again.kind == INTERPRETED
+    np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
+    assert len(caplog.records) == 1
+    assert "not built" in caplog.records[0].message
+    assert caplog.records[0].message.endswith("fatal: out of luck")
+    assert not list(cache.glob("*.so")) and not list(cache.glob("*.tmp"))
+
+
+def test_too_big_to_compile_is_remembered(cache, monkeypatch, caplog):
+    monkeypatch.setattr(nlp_library, "MAX_SOURCE_BYTES", 1000)
+    with caplog.at_level(logging.WARNING, logger=nlp_library.__name__):
+        solver, x = solve("rosenbrock", background=False)
+    assert solver.kind == INTERPRETED
+    np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
+    assert len(caplog.records) == 1 and "too big to compile" in caplog.records[0].message
+    assert [p.suffix for p in cache.iterdir()] == [".too-big"]
+
+    def no_generation(*args):
+        raise AssertionError("the C was generated again")
+
+    monkeypatch.setattr(nlp_library, "_generate", no_generation)
+    again, _ = solve("rosenbrock", background=False)
+    assert again.kind == INTERPRETED
+
+
+def build_in_child(cache: str, queue: multiprocessing.Queue) -> None:
+    os.environ[compiled.CACHE_ENV] = cache
+    solver, x = solve("rosenbrock concurrent", background=False)
+    queue.put((solver.kind, str(solver.library), x.tolist()))
+
+
+def test_concurrent_builders_leave_one_valid_library(cache):
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    workers = [context.Process(target=build_in_child, args=(str(cache), queue)) for _ in range(2)]
+    for worker in workers:
+        worker.start()
+    results = [queue.get(timeout=120) for _ in workers]
+    for worker in workers:
+        worker.join(timeout=60)
+    assert {kind for kind, _, _ in results} <= {COMPILED, LOADED}
+    assert len({library for _, library, _ in results}) == 1
+    assert [p.name for p in cache.iterdir()] == [os.path.basename(results[0][1])]
+    loaded, x = solve("rosenbrock concurrent", build=unused)
+    assert loaded.kind == LOADED
+    np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
