@@ -13,16 +13,28 @@ little that cutting a corner within the tolerance saves.
 from __future__ import annotations
 
 from itertools import pairwise
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spm_opt.problem import Problem
+if TYPE_CHECKING:
+    from spm_opt.problem import Problem
 
 SAMPLES_PER_SEGMENT = 2001
 
 
 def segment_lower_bounds(problem: Problem, samples: int = SAMPLES_PER_SEGMENT) -> np.ndarray:
-    """Shortest time, s, for each segment between consecutive landmark visits (segments,)."""
+    """Shortest time, s, for each segment between consecutive landmark visits (segments,);
+    at the default sampling, the problem's own :attr:`Problem.segment_lower_bounds`,
+    computed once per problem."""
+    if samples == SAMPLES_PER_SEGMENT:
+        return problem.segment_lower_bounds.copy()
+    return sampled_segment_lower_bounds(problem, samples)
+
+
+def sampled_segment_lower_bounds(problem: Problem, samples: int) -> np.ndarray:
+    """Shortest time, s, for each segment (segments,), integrating the pace over ``samples``
+    evenly spaced contour points per segment."""
     contour, limits = problem.contour, problem.limits
     bounds = []
     for start, end in pairwise(contour.landmark_arc_lengths):

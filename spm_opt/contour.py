@@ -16,6 +16,15 @@ import numpy as np
 from spm_opt.model import kinematics
 
 _GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(16)
+_GAUSS_FRACTIONS = _GAUSS_NODES + 1
+"""The Gauss nodes as fractions of half the interval, from its start (0 to 2)."""
+NEWTON_STEPS = 8
+"""Newton steps of :meth:`Contour.point_at` (from the constant-radius guess)."""
+PRODUCT_ROWS = 16_384
+"""Rows per matrix product in :func:`_components`: few enough that OpenBLAS keeps a product
+of three columns on one thread (starting threads costs more than it saves on so little
+work, and far more on a busy machine), and a power of two, so that every row meets the
+same kernel as in one product (the same values, to the bit)."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +79,8 @@ class Contour:
         """Angle of each arc, rad."""
         self.normal = normal / sine[:, None]
         self.inplane = np.cross(self.normal, self.start)
+        self.end = self._unit(np.arange(len(self.sweep)), self.sweep)
+        """Unit direction at the end of each arc (its next landmark's, to rounding)."""
         self.radius_slope = (self.end_radius - self.start_radius) / self.sweep
         """dρ/dφ of each arc, m/rad."""
         self.arc_lengths = self._length_to(np.arange(len(self.sweep)), self.sweep)
@@ -87,9 +98,7 @@ class Contour:
     def _length_to(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """Arc length from the start of ``arc`` to ``angle``: ∫ sqrt(ρ² + ρ'²) dφ (Gauss)."""
         arc, angle = np.broadcast_arrays(np.asarray(arc), np.asarray(angle, dtype=float))
-        psi = (angle[..., None] / 2) * (_GAUSS_NODES + 1)
-        integrand = np.hypot(self._radius(arc[..., None], psi), self.radius_slope[arc][..., None])
-        return (angle / 2) * (integrand @ _GAUSS_WEIGHTS)
+        return _gauss_length(self.start_radius[arc], self.radius_slope[arc], angle)
 
     def point_at(self, s: np.ndarray) -> np.ndarray:
         """Contour points (N, 3), m, at arc lengths ``s`` (N,), m, from the first landmark."""
@@ -98,13 +107,13 @@ class Contour:
             np.searchsorted(self.landmark_arc_lengths, s, side="right") - 1, 0, len(self.sweep) - 1
         )
         local = s - self.landmark_arc_lengths[arc]
-        angle = local / np.hypot(self._radius(arc, 0.0), self.radius_slope[arc])
-        for _ in range(8):  # Newton on s(φ) = local; ds/dφ = sqrt(ρ² + ρ'²) > 0
-            rate = np.hypot(self._radius(arc, angle), self.radius_slope[arc])
-            angle = np.clip(
-                angle - (self._length_to(arc, angle) - local) / rate, 0, self.sweep[arc]
-            )
-        return self._unit(arc, angle) * self._radius(arc, angle)[..., None]
+        start_radius, slope, sweep = self.start_radius[arc], self.radius_slope[arc], self.sweep[arc]
+        angle = local / np.hypot(start_radius, slope)
+        for _ in range(NEWTON_STEPS):  # on s(φ) = local; ds/dφ = sqrt(ρ² + ρ'²) > 0
+            rate = np.hypot(start_radius + slope * angle, slope)
+            step = (_gauss_length(start_radius, slope, angle) - local) / rate
+            angle = np.clip(angle - step, 0, sweep)
+        return self._unit(arc, angle) * (start_radius + slope * angle)[..., None]
 
     def _unit(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
         return (
@@ -117,20 +126,21 @@ class Contour:
         points (a cut point, B) taken as their direction from the isocenter."""
         p = np.asarray(directions, dtype=float)
         p = p / np.linalg.norm(p, axis=-1, keepdims=True)
-        along = p @ self.start.T  # (N, arcs)
-        across = p @ self.inplane.T
+        # (N, arcs) arrays, each buffer reused once its values are no longer needed
+        along = _components(p, self.start)
+        across = _components(p, self.inplane)
         angle = np.arctan2(across, along)
         interior = (angle > 0.0) & (angle < self.sweep)
-        in_plane = np.hypot(along, across)
-        off_plane = np.abs(p @ self.normal.T)
-        offset = np.where(interior, np.arctan2(off_plane, in_plane), np.inf)
-        ends = np.stack([self.start, self._unit(np.arange(len(self.sweep)), self.sweep)])
-        to_ends = np.arccos(np.clip(np.einsum("nk,eak->ena", p, ends), -1.0, 1.0))
-        closest_end = np.argmin(to_ends, axis=0)  # 0: start, 1: end, per (N, arcs)
-        end_offset = np.min(to_ends, axis=0)
+        in_plane = np.hypot(along, across, out=along)
+        off_plane = np.abs(_components(p, self.normal, out=across), out=across)
+        offset = np.arctan2(off_plane, in_plane, out=in_plane)
+        offset[~interior] = np.inf
+        to_start, to_end = _angles_between(p, self.start), _angles_between(p, self.end)
+        end_angle = np.where(to_end < to_start, self.sweep, 0.0)
+        end_offset = np.minimum(to_start, to_end, out=to_start)
         use_end = end_offset < offset
-        offset = np.where(use_end, end_offset, offset)
-        angle = np.where(use_end, np.where(closest_end == 0, 0.0, self.sweep), angle)
+        np.copyto(offset, end_offset, where=use_end)
+        np.copyto(angle, end_angle, where=use_end)
         arc = np.argmin(offset, axis=1)
         rows = np.arange(len(p))
         chosen_angle = angle[rows, arc]
@@ -183,19 +193,20 @@ class Contour:
         """Speed (N,), m/s, of the cut point for joint angles q (N, 2), rad, moving at
         q̇ (N, 2) or (2,), rad/s (see :meth:`tool_speed`)."""
         q = np.asarray(q, dtype=float)
-        jacobian = kinematics.platform_jacobian(q, 1.0)
-        rates = np.einsum("nij,nj->ni", jacobian, np.broadcast_to(qd, q.shape))
-        return self.tool_speed(kinematics.forward_kinematics(q, 1.0), rates)
+        return self.tool_speed(kinematics.forward_kinematics(q, 1.0), direction_rates(q, qd))
 
-    def tool_speed(self, directions: np.ndarray, direction_rates: np.ndarray) -> np.ndarray:
-        """Speed (N,), m/s, of the cut point for unit directions p (N, 3) moving at ṗ (N, 3).
+    def tool_speed(
+        self, directions: np.ndarray, direction_rates: np.ndarray, near: Nearest | None = None
+    ) -> np.ndarray:
+        """Speed (N,), m/s, of the cut point for unit directions p (N, 3) moving at ṗ (N, 3),
+        1/s; ``near``: the contour points nearest to p, when already found.
 
         The cut point is P = ρ p, so |Ṗ|² = ρ² |ṗ|² + ρ̇², with ρ̇ = ρ' φ̇ where the nearest
         contour point moves along an arc (and 0 where it sits at a landmark).
         """
         p = np.asarray(directions, dtype=float)
         p_dot = np.asarray(direction_rates, dtype=float)
-        near = self.nearest(p)
+        near = self.nearest(p) if near is None else near
         a, w = self.start[near.arc], self.inplane[near.arc]
         pa, pw = np.einsum("nk,nk->n", p, a), np.einsum("nk,nk->n", p, w)
         angle_rate = (
@@ -203,3 +214,38 @@ class Contour:
         ) / (pa**2 + pw**2)
         radius_rate = np.where(near.interior, self.radius_slope[near.arc] * angle_rate, 0.0)
         return np.hypot(near.radius * np.linalg.norm(p_dot, axis=1), radius_rate)
+
+
+def direction_rates(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Rates ṗ (N, 3), 1/s, of the platform's unit direction for joint angles q (N, 2), rad,
+    moving at q̇ (N, 2) or (2,), rad/s."""
+    q = np.asarray(q, dtype=float)
+    jacobian = kinematics.platform_jacobian(q, 1.0)
+    return np.einsum("nij,nj->ni", jacobian, np.broadcast_to(qd, q.shape))
+
+
+def _gauss_length(start_radius: np.ndarray, slope: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """∫₀^angle sqrt(ρ² + ρ'²) dφ, m, with ρ = start_radius + slope φ, element by element
+    (16-point Gauss–Legendre; radii in m, slopes in m/rad, angles in rad)."""
+    half = angle / 2
+    radius = half[..., None] * _GAUSS_FRACTIONS
+    radius *= slope[..., None]
+    radius += start_radius[..., None]
+    integrand = np.hypot(radius, slope[..., None], out=radius)
+    return half * (integrand @ _GAUSS_WEIGHTS)
+
+
+def _components(p: np.ndarray, axes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """p @ axes.T: components (N, arcs) of vectors p (N, 3) along unit vectors (arcs, 3),
+    ``PRODUCT_ROWS`` rows at a time, into ``out`` when given."""
+    out = np.empty((len(p), len(axes))) if out is None else out
+    for start in range(0, len(p), PRODUCT_ROWS):
+        rows = slice(start, start + PRODUCT_ROWS)
+        np.matmul(p[rows], axes.T, out=out[rows])
+    return out
+
+
+def _angles_between(p: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Angles (N, arcs), rad, between unit directions p (N, 3) and unit vectors (arcs, 3)."""
+    cosine = np.einsum("nk,ak->na", p, ends)
+    return np.arccos(np.clip(cosine, -1.0, 1.0, out=cosine), out=cosine)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from spm_opt.bounds import duration_lower_bound
+from spm_opt.contour import direction_rates
 from spm_opt.limits import RULES, path_tolerance
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
@@ -128,6 +129,11 @@ def _format(value: Any) -> str:
     return str(value)
 
 
+def _peaks(values: np.ndarray) -> np.ndarray:
+    """Largest magnitude in each column of ``values`` (N, joints), in their units."""
+    return np.array([np.max(np.abs(column)) for column in values.T])
+
+
 def _time_mean(values: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Time average over the grid (trapezoid rule), per column."""
     return np.trapezoid(values, t, axis=0) / (t[-1] - t[0])
@@ -145,20 +151,17 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     """
     robot, limits, contour = problem.robot, problem.limits, problem.contour
     t = trajectory.time_grid(rate_hz)
-    q = trajectory.position(t)
-    qd = trajectory.velocity(t)
-    qdd = trajectory.acceleration(t)
-    jerk = trajectory.jerk(t)
+    q, qd, qdd, jerk = trajectory.states(t)
     directions = kinematics.forward_kinematics(q, 1.0)
     near = contour.nearest(directions)
     deviation = contour.chord(near)
-    tool_speed = contour.joint_tool_speed(q, qd)
+    tool_speed = contour.tool_speed(directions, direction_rates(q, qd), near)
     margins = kinematics.singularity_margins(q)
     torque = dynamics.actuator_torque(robot, q, qd, qdd)
     current = robot.actuator.current_map.current(torque)
     torque_limit = problem.max_joint_torque
-    peak_torque = np.max(np.abs(torque), axis=0)
-    peak_current = np.max(np.abs(current), axis=0)
+    peak_torque = _peaks(torque)
+    peak_current = _peaks(current)
     duration = t[-1] - t[0]
     mean_speed = float(_time_mean(tool_speed, t))
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
@@ -227,11 +230,11 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     return Report(
         planner=trajectory.metadata.get("planner"),
         duration_s=trajectory.duration,
-        peak_joint_speed_rad_s=np.max(np.abs(qd), axis=0).tolist(),
+        peak_joint_speed_rad_s=_peaks(qd).tolist(),
         joint_speed_limit_rad_s=limits.max_joint_speed,
-        peak_joint_acceleration_rad_s2=np.max(np.abs(qdd), axis=0).tolist(),
+        peak_joint_acceleration_rad_s2=_peaks(qdd).tolist(),
         rms_jerk_rad_s3=np.sqrt(_time_mean(jerk**2, t)).tolist(),
-        max_acceleration_step_rad_s2=np.max(np.abs(steps), axis=0).tolist(),
+        max_acceleration_step_rad_s2=_peaks(steps).tolist(),
         max_contour_deviation_mm=float(np.max(deviation) / MM),
         rms_contour_deviation_mm=float(np.sqrt(_time_mean(deviation**2, t)) / MM),
         max_tool_speed_mm_s=float(np.max(tool_speed) / MM),

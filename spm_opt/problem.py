@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from spm_opt import bounds
 from spm_opt.contour import Contour
 from spm_opt.errors import InputError
 from spm_opt.fields import Table, apply_overrides, read_toml
@@ -181,6 +182,14 @@ class Problem:
     def contour(self) -> Contour:
         """The planned cut through the landmarks."""
         return Contour(self.landmarks, self.closed)
+
+    @cached_property
+    def segment_lower_bounds(self) -> np.ndarray:
+        """Shortest time, s, for each segment between landmark visits that the limits allow
+        along the contour (segments,), read-only (:mod:`spm_opt.bounds`)."""
+        lower = bounds.sampled_segment_lower_bounds(self, bounds.SAMPLES_PER_SEGMENT)
+        lower.setflags(write=False)
+        return lower
 
     def contour_angles(self, s: np.ndarray) -> np.ndarray:
         """Joint angles (N, 2), rad, that put the cut at arc lengths s (N,), m, along the

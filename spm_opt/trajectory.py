@@ -131,7 +131,7 @@ class Trajectory:
 
     def position(self, t: np.ndarray | float) -> np.ndarray:
         """q(t), shape (N, 2), rad. Times outside the trajectory take its end values."""
-        return np.asarray(self._q(self._clip(t)))
+        return _evaluate(self._q, self._clip(t))
 
     def velocity(self, t: np.ndarray | float) -> np.ndarray:
         """q̇(t), shape (N, 2), rad/s."""
@@ -144,6 +144,21 @@ class Trajectory:
     def jerk(self, t: np.ndarray | float) -> np.ndarray:
         """Third derivative of q(t), shape (N, 2), rad/s³ (one-sided at breakpoints)."""
         return self._derivative(2, t)
+
+    def states(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """q, q̇, q̈ and the jerk at times t (N,), each (N, 2), SI: what :meth:`position`,
+        :meth:`velocity`, :meth:`acceleration` and :meth:`jerk` give, computed together."""
+        t = np.asarray(t, dtype=float)
+        inside = self._clip(t)
+        sums = _BernsteinSums(self._q.x, inside) if _sums_faster(self._q) else None
+        position, *derivatives = (
+            _evaluate(poly, inside, sums) for poly in (self._q, *self._derivatives)
+        )
+        outside = (t < self.start_time) | (t > self.end_time)
+        if np.any(outside):
+            derivatives = [np.where(outside[..., None], 0.0, values) for values in derivatives]
+        velocity, acceleration, jerk = derivatives
+        return position, velocity, acceleration, jerk
 
     def acceleration_steps(self) -> tuple[np.ndarray, np.ndarray]:
         """Where q̈ jumps: times (K,), s, and steps (K, 2), rad/s², at the start (from rest),
@@ -163,7 +178,7 @@ class Trajectory:
 
     def _derivative(self, index: int, t: np.ndarray | float) -> np.ndarray:
         t = np.asarray(t, dtype=float)
-        values = np.asarray(self._derivatives[index](self._clip(t)))
+        values = _evaluate(self._derivatives[index], self._clip(t))
         outside = (t < self.start_time) | (t > self.end_time)
         return np.where(outside[..., None], 0.0, values) if np.any(outside) else values
 
@@ -178,7 +193,7 @@ class Trajectory:
         uniform = self.start_time + np.arange(0.0, self.duration, 1.0 / rate_hz)
         right = np.clip(np.searchsorted(breaks, uniform), 1, len(breaks) - 1)
         gap = np.minimum(np.abs(uniform - breaks[right - 1]), np.abs(breaks[right] - uniform))
-        return np.union1d(uniform[gap > _SAME_TIME_S], breaks)
+        return _sorted_union(uniform[gap > _SAME_TIME_S], breaks)
 
     def samples(self, rate_hz: float | None = None) -> tuple[np.ndarray, ...]:
         """(t, q, qd, qdd): the samples it was built from, or a grid at ``rate_hz``."""
@@ -246,6 +261,69 @@ class Trajectory:
                 raise InputError(f"{sidecar}: expected a JSON object")
             _check_landmark_times(sidecar, metadata.get("landmark_times_s"))
         return cls.from_samples(t, q, qd, qdd, metadata)
+
+
+def _sorted_union(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """``np.union1d`` of two ascending arrays, merged without sorting them again."""
+    merged = np.insert(first, np.searchsorted(first, second), second)
+    return merged[np.concatenate([[True], merged[1:] != merged[:-1]])]
+
+
+def _evaluate(poly: PPoly | BPoly, t: np.ndarray, sums: _BernsteinSums | None = None) -> np.ndarray:
+    """``poly(t)``, shape t.shape + (outputs,). Bernstein pieces beyond the degrees scipy
+    sums in closed form go through :class:`_BernsteinSums` (``sums``, when given at the
+    same times and breakpoints): the same values, faster."""
+    if not _sums_faster(poly):
+        return np.asarray(poly(t))
+    return (sums or _BernsteinSums(poly.x, t))(poly.c)
+
+
+def _sums_faster(poly: PPoly | BPoly) -> bool:
+    """Whether :class:`_BernsteinSums` evaluates ``poly`` (Bernstein pieces of degree 4 or
+    more along axis 0; scipy's closed forms for lower degrees are faster)."""
+    return isinstance(poly, BPoly) and poly.axis == 0 and poly.c.ndim == 3 and len(poly.c) > 4
+
+
+class _BernsteinSums:
+    """Σ_j C(k, j) s^j (1 − s)^(k−j) c_j at times t, for Bernstein coefficients c of
+    degree k between ``breakpoints``, s the time within the piece over its length; times
+    beyond the breakpoints use the end pieces.
+
+    The arithmetic of scipy's ``BPoly`` in the same order, with libm's ``pow`` for the
+    powers (``np.float_power``), so the results are scipy's to the bit; vectorised over t,
+    with where the times fall and each power of s and 1 − s computed once for every output
+    and every polynomial on the same breakpoints.
+    """
+
+    def __init__(self, breakpoints: np.ndarray, t: np.ndarray) -> None:
+        t = np.asarray(t, dtype=float)
+        times = t.ravel()
+        last = len(breakpoints) - 2
+        self.shape = t.shape
+        self.piece = np.clip(np.searchsorted(breakpoints, times, side="right") - 1, 0, last)
+        start = breakpoints[self.piece]
+        s = (times - start) / (breakpoints[self.piece + 1] - start)
+        self._rising = [np.ones_like(s), s]
+        self._falling = [np.ones_like(s), 1.0 - s]
+
+    def __call__(self, coefficients: np.ndarray) -> np.ndarray:
+        """Values, shape t.shape + (outputs,), of coefficients (k + 1, pieces, outputs)."""
+        degree = len(coefficients) - 1
+        total = np.zeros((len(self.piece), coefficients.shape[2]))
+        comb = 1.0
+        for j in range(degree + 1):
+            weight = comb * _power(self._rising, j) * _power(self._falling, degree - j)
+            total += weight[:, None] * coefficients[j, self.piece]
+            comb *= 1.0 * (degree - j) / (j + 1.0)
+        return total.reshape(self.shape + coefficients.shape[2:])
+
+
+def _power(powers: list[np.ndarray], exponent: int) -> np.ndarray:
+    """x**exponent from ``powers`` = [x**0, x**1, ...], extended as needed with libm's pow
+    (x**0 = 1 and x**1 = x exactly, as pow gives them)."""
+    while len(powers) <= exponent:
+        powers.append(np.float_power(powers[1], float(len(powers))))
+    return powers[exponent]
 
 
 def sidecar_path(path: Path) -> Path:
