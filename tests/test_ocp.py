@@ -191,7 +191,7 @@ def test_min_energy_beats_the_others_on_its_own_objective(
     minimum-time plan (gravity holding dominates: a shorter cut costs less effort)."""
     report = so.evaluate(paper_problem, min_energy)
     assert report.violations == []
-    assert report.duration_s <= 40.0 + 1e-9
+    assert report.duration_s <= 40.0 * (1 + 1e-6)  # the total duration: an IPOPT row
     assert report.effort_n2m2s < 0.8 * so.evaluate(paper_problem, baseline).effort_n2m2s
     assert report.effort_n2m2s <= so.evaluate(paper_problem, min_time).effort_n2m2s
 
