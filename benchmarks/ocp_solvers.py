@@ -44,8 +44,8 @@ def stagewise(
     """The minimum-time NLP stage by stage: (problem, bounds and guess, equality flags)."""
     grid = nlp.grid
     m, d, segments = grid.intervals, 3 * grid.segments, grid.segments
-    interval = interval_function(nlp.checks, False, ocp._load_torque, ocp._dynamics_size())
-    arcs, dynamics = ocp._arcs(problem), ocp._dynamics_parameters(problem)
+    interval = interval_function(nlp.checks, False, None, 0)
+    arcs, dynamics = ocp._arcs(problem), ocp._dynamics_parameters(problem, False)
     states0, jerks0, durations0 = grid.split(x0)
     states_low, jerks_low, durations_low = grid.split(box["lbx"])
     states_high, jerks_high, durations_high = grid.split(box["ubx"])
@@ -126,14 +126,14 @@ def main() -> None:
     x0 = ocp._guess(problem, grid, np.diff(start.metadata["landmark_times_s"]), start)
     fractions = np.tile(ocp.default_fractions(nlp.checks)[:, None], grid.intervals)
     weights = [settings.time_weight, settings.energy_weight, settings.jerk_weight]
-    terms = nlp.terms(x0, ocp._parameters(problem, fractions, weights, np.ones(3)))
+    terms = nlp.terms(x0, ocp._parameters(problem, fractions, weights, np.ones(3), False))
     scales = np.maximum(np.abs([float(v) for v in terms]), 1e-9)
     box = ocp._bounds(
         problem, nlp, planner_bounds(problem, settings.margin), "free", grid.split(x0)[2]
     )
     ipopt = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive", "tol": settings.tolerance}
     global_form = ocp._solver(len(problem.segment_durations), settings, False, warm=False)
-    parameters = ocp._parameters(problem, fractions, weights, scales)
+    parameters = ocp._parameters(problem, fractions, weights, scales, False)
     d = 3 * grid.segments
     results = [
         time_solver(

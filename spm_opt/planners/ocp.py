@@ -35,9 +35,10 @@ where the contour-following one found 38.09 s.
 
 Solver: IPOPT (MUMPS) with an adaptive barrier, never falling back to the monotone mode
 (minimum time: 44, 40 and 50 iterations on the paper's, the five-landmark and the large
-flaps against 63, 202 and 212 with IPOPT's default globalisation, same durations). The torque model is the B-spline table of
-:mod:`spm_opt.model.torque_table` (the robot an NLP parameter), expanded into SX; NLPs
-without the torque rows are compiled to C and cached on disk (:mod:`nlp_library`). FATROP,
+flaps against 63, 202 and 212 with IPOPT's default globalisation, same durations). The
+torque model is the B-spline table of :mod:`spm_opt.model.torque_table` (the robot an NLP
+parameter), expanded into SX; NLPs without the torque rows are compiled to C and cached on
+disk (:mod:`nlp_library`). FATROP,
 measured on the same minimum-time problem made stage-wise (the phase durations carried as
 states; ``python benchmarks/ocp_solvers.py``): 484 iterations and 13.5 s against IPOPT's 184
 and 4.6 s on that NLP and IPOPT's 64 and 1.8 s on this module's (global durations), all
@@ -203,8 +204,12 @@ def _range_key(problem: Problem) -> bytes:
     return np.ascontiguousarray(problem.robot.joint_range, dtype=float).tobytes()
 
 
-def _dynamics_parameters(problem: Problem) -> np.ndarray:
-    """The robot as the NLP takes it: its torque table's values, then the rotor's J."""
+def _dynamics_parameters(problem: Problem, with_torque: bool) -> np.ndarray:
+    """The robot as the NLP takes it: its torque table's values, then the rotor's J; none
+    without the torque rows (an unused input of the mapped interval function swells the
+    generated C of its derivatives: 31 against 7 MB for minimum time)."""
+    if not with_torque:
+        return np.zeros(0)
     rotor = problem.robot.actuator.rotor_inertia_kg_m2
     return np.concatenate([torque_table.table_values(problem.robot), [rotor]])
 
@@ -241,7 +246,7 @@ def _nlp(segments: int, settings: OcpSettings, with_torque: bool, joint_range: b
     arcs = ca.MX.sym("arcs", ARC_PARAMETERS, segments)
     fractions = ca.MX.sym("fractions", checks, m)
     table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
-    n_dynamics = table.size1_in(3) + 1  # the table's values, then the rotor's J
+    n_dynamics = table.size1_in(3) + 1 if with_torque else 0  # the table's values, J
     dynamics_parameters = ca.MX.sym("dynamics", n_dynamics)
     weights, scales = ca.MX.sym("w", 3), ca.MX.sym("s", 3)
 
@@ -359,14 +364,18 @@ def _arcs(problem: Problem) -> np.ndarray:
 
 
 def _parameters(
-    problem: Problem, fractions: np.ndarray, weights: list[float], scales: np.ndarray
+    problem: Problem,
+    fractions: np.ndarray,
+    weights: list[float],
+    scales: np.ndarray,
+    with_torque: bool,
 ) -> np.ndarray:
     """p for one problem: arcs, check fractions (checks, M), dynamics, weights, scales."""
     return np.concatenate(
         [
             _arcs(problem).ravel(),
             fractions.ravel(order="F"),
-            _dynamics_parameters(problem),
+            _dynamics_parameters(problem, with_torque),
             weights,
             scales,
         ]
@@ -602,13 +611,11 @@ check points."""
 
 
 @cache
-def _probe(
-    segments: int, settings: OcpSettings, n_dynamics: int
-) -> tuple[ca.Function, tuple[RowGroup, ...]]:
+def _probe(segments: int, settings: OcpSettings) -> tuple[ca.Function, tuple[RowGroup, ...]]:
     """The interval function with :data:`PROBE_POINTS` check points, mapped over the grid,
     and its row groups."""
     grid = _grid(segments, settings)
-    interval = interval_function(PROBE_POINTS, False, None, n_dynamics)
+    interval = interval_function(PROBE_POINTS, False, None, 0)
     return interval.map(grid.intervals), row_groups(PROBE_POINTS, False)
 
 
@@ -623,8 +630,7 @@ def _moved_check_points(
     check points, the check nearest to the worst place moved there; and the names of the
     constraints so exceeded."""
     grid = _grid(len(problem.segment_durations), settings)
-    dynamics_parameters = _dynamics_parameters(problem)
-    probe, groups = _probe(grid.segments, settings, len(dynamics_parameters))
+    probe, groups = _probe(grid.segments, settings)
     states, jerks, durations = grid.split(x)
     places = default_fractions(PROBE_POINTS)
     _, rows, _ = probe(
@@ -633,7 +639,7 @@ def _moved_check_points(
         (grid.interval_matrix @ durations)[None, :],
         (_arcs(problem).T)[:, grid.interval_segments],
         np.tile(places[:, None], (1, grid.intervals)),
-        dynamics_parameters,
+        np.zeros(0),
     )
     rows = rows.full().T  # (M, probe rows)
     worst = np.full((grid.intervals, PROBE_POINTS), -np.inf)
@@ -789,10 +795,12 @@ class OcpPlanner:
         if isinstance(start, _Solution):
             scales, guess = start.scales, start.continuation
         else:
-            at_guess = nlp.terms(start, _parameters(problem, fractions, weights, np.ones(3)))
+            at_guess = nlp.terms(
+                start, _parameters(problem, fractions, weights, np.ones(3), with_torque)
+            )
             scales = np.maximum(np.abs([float(v) for v in at_guess]), 1e-9)
             guess = {"x0": start}
-        parameters = _parameters(problem, fractions, weights, scales)
+        parameters = _parameters(problem, fractions, weights, scales, with_torque)
         box = _bounds(problem, nlp, bounds, settings.timing, nlp.grid.split(guess["x0"])[2])
         started = time.perf_counter()
         solution = solver(**guess, p=parameters, **box)
