@@ -10,7 +10,8 @@ durations, which ``ocp-min-time`` keeps as D global variables, become states car
 stage to stage (T_{k+1} = T_k), and the segment-duration rows stage-0 rows. Both solvers
 are timed on that stage-wise NLP, built here from the planner's own interval function,
 bounds and guess (the toppra plan), and IPOPT also on the planner's NLP (global durations),
-all interpreted (``expand``). Rows: the median solve wall time over ``--repeats``, the
+the stage-wise ones interpreted (``expand``), the planner's on its compiled interval
+functions as it plans. Rows: the median solve wall time over ``--repeats``, the
 time in the NLP's functions, iterations, status and the total duration found.
 """
 
@@ -28,7 +29,7 @@ from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.limits import planner_bounds
-from spm_opt.planners import ocp
+from spm_opt.planners import nlp_library, ocp
 from spm_opt.planners.ocp_transcription import STATE, interval_function
 
 
@@ -93,6 +94,14 @@ def stagewise(
     return form, data, equality
 
 
+FATROP_OPTIONS = {
+    "defaults": {},
+    "mu_init 1e-4, bound_push 1e-6": {"mu_init": 1e-4, "bound_push": 1e-6},
+}
+"""FATROP's options tried: its barrier is monotone, so a start near the optimum wants a
+small initial barrier and little push off the bounds."""
+
+
 def time_solver(
     label: str, solver: ca.Function, data: dict, repeats: int, total: Any
 ) -> dict[str, Any]:
@@ -120,7 +129,8 @@ def main() -> None:
     problem = so.load_problem(args.problem)
     planner = so.PLANNERS["ocp-min-time"]
     settings = planner.settings(problem)
-    nlp = ocp._nlp(len(problem.segment_durations), settings, False)
+    joint_range = ocp._range_key(problem)
+    nlp = ocp._nlp(len(problem.segment_durations), settings, False, joint_range)
     grid = nlp.grid
     start = so.plan(problem, "toppra")
     x0 = ocp._guess(problem, grid, np.diff(start.metadata["landmark_times_s"]), start)
@@ -132,7 +142,10 @@ def main() -> None:
         problem, nlp, planner_bounds(problem, settings.margin), "free", grid.split(x0)[2]
     )
     ipopt = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive", "tol": settings.tolerance}
-    global_form = ocp._solver(len(problem.segment_durations), settings, False, warm=False)
+    global_form = ocp._solver(
+        len(problem.segment_durations), settings, False, joint_range, warm=False
+    )
+    nlp_library.wait_for_builds()
     parameters = ocp._parameters(problem, fractions, weights, scales, False)
     d = 3 * grid.segments
     results = [
@@ -156,21 +169,22 @@ def main() -> None:
             carried,
         )
     )
-    fatrop = {
-        **base,
-        "structure_detection": "auto",
-        "equality": equality,
-        "fatrop": {"print_level": 0, "tol": settings.tolerance},
-    }
-    results.append(
-        time_solver(
-            "FATROP, stage-wise NLP",
-            ca.nlpsol("s", "fatrop", form, fatrop),
-            data,
-            args.repeats,
-            carried,
+    for label, own in FATROP_OPTIONS.items():
+        fatrop = {
+            **base,
+            "structure_detection": "auto",
+            "equality": equality,
+            "fatrop": {"print_level": 0, "tol": settings.tolerance, "max_iter": 1000, **own},
+        }
+        results.append(
+            time_solver(
+                f"FATROP, stage-wise NLP, {label}",
+                ca.nlpsol("s", "fatrop", form, fatrop),
+                data,
+                args.repeats,
+                carried,
+            )
         )
-    )
     print(
         f"{'solver':46s} {'median s':>9s} {'f-eval s':>9s} {'iters':>6s} "
         f"{'duration s':>10s}  status"

@@ -1,34 +1,25 @@
-"""NLP solvers whose functions (objective, constraints, their derivatives, the Lagrangian's
-Hessian) are compiled C in a shared library cached on disk.
+"""NLP solvers whose functions run as compiled C from a shared library cached on disk.
 
-:func:`nlp_solver` takes a cheap ``key`` for the formulation (the caller's: e.g. a hash of
-the code that builds it and of its settings) and adds what else makes the binary: CasADi's
-version, the compiler, the flags, the plugin and the options that choose which functions
-the plugin needs. When the library is in the cache (``$SPM_OPT_CACHE`` or
-``~/.cache/spm_opt``, as for :mod:`spm_opt.model.compiled`), the solver is loaded from it
-without building the symbolic graph. Otherwise the graph is built and the solver returned
-runs in CasADi's interpreter while the C (what ``generate_dependencies`` writes) is
-generated here and compiled in a background thread; the :class:`Solver` switches to the
-library on its first call after the library appears, and later calls load it. Without a C
-compiler, when the build fails, or when the C is too big to compile
-(:data:`MAX_SOURCE_BYTES`), the solver stays interpreted and one warning says so. A
-process that ends during a build waits for it, so that the next one finds the library.
+The NLP is made of a few small functions (the optimal-control NLP: one interval's value,
+Jacobian and Hessian, :mod:`spm_opt.planners.ocp_assembly`) and an ``assemble`` step that
+builds the NLP and its derivative functions from them, in SX or compiled alike.
+:func:`nlp_solver` takes a cheap ``key`` for those functions (the caller's: e.g. a hash of
+the code that builds them) and adds what else makes the binary: CasADi's version, the
+compiler and its flags. When the library is in the cache (``$SPM_OPT_CACHE`` or
+``~/.cache/spm_opt``, as for :mod:`spm_opt.model.compiled`), the functions are loaded from
+it without building their symbolic graph. Otherwise the solver returned runs the SX
+functions in CasADi's interpreter while their C is generated here and compiled in a
+background thread; the :class:`Solver` switches to the library on its first call after the
+library appears, and later calls load it. Without a C compiler, when the build fails, or
+when the C is too big to compile (:data:`MAX_SOURCE_BYTES`), the solver stays interpreted
+and one warning says so. A process that ends during a build waits for it, so that the next
+one finds the library.
 
-The C is generated from the MX graph (``expand`` off) whatever the caller's ``expand``:
-the expanded SX code is 5 times bigger and 80 times slower to compile for the same speed.
-The paper's minimum-time NLP (4 segments, 104 intervals, no torque rows; CasADi 3.8.2,
-gcc 12 at -O1, 2 shared cores; one solve from the planner's guess, 47 iterations)::
-
-    solver                 C      build   hess_l  jac_g   grad_f  functions  solve
-    SX, interpreted        -      -       3–5 ms  1.1 ms  0.01 ms 0.20–0.29 s 0.36–0.47 s
-    MX, interpreted        -      -       20 ms   6.8 ms  0.7 ms  1.38 s     1.61 s
-    MX compiled            7 MB   6 s     1.7 ms  0.7 ms  0.07 ms 0.13 s     0.35 s
-    SX compiled            38 MB  506 s   2.2 ms  0.65 ms 0.01 ms 0.14 s     0.34 s
-
-Getting the solver: 0.9 s interpreted (graph and SX expansion), 1.5 s on a cache miss
-(with the MX solver and 0.5 s of code generation), 7.7 s when compiling before returning,
-0.004 s loading the library (a fresh process: 0.9 s of imports, then 0.004 s). Hence the
-background build: the first solve waits 1.5 s rather than 7.7 s to save 0.1 s a solve.
+Besides the functions, the library holds the reverse derivative of the first (the value
+function): CasADi's ``nlpsol`` asks for it when it is created, even with every derivative
+given. Building the paper's minimum-time interval library takes about 1 s at -O1, the
+minimum-jerk one (three check points) 2.5 s, the one with the torque table 12 s (36 MB of
+C, most of it the table's coefficients); loading takes milliseconds.
 """
 
 from __future__ import annotations
@@ -54,24 +45,22 @@ from spm_opt.model.compiled import build_library, cache_directory, compiler
 _LOG = logging.getLogger(__name__)
 
 BUILD_FLAGS = ("-O1", "-fPIC", "-shared")
-"""Compiler flags: -O1 makes the functions 3× faster than -O0 (0.13 against 0.42 s a
-minimum-time solve) and compiles in 6 s; -O2 and -O3 take 17–20 s for 6 % more."""
+"""Compiler flags: -O1, as measured for whole NLPs, made the functions 3× faster than -O0
+at a fraction of -O2's and -O3's build time for 6 % less speed."""
 
 LOADED, COMPILED, INTERPRETED = "loaded", "compiled", "interpreted"
 """How a :class:`Solver` got its function: from the disk cache, compiled in this call, or
 CasADi's interpreter (its library absent, still being built, or impossible)."""
 
-MAX_SOURCE_BYTES = 20_000_000
-"""Larger C is not compiled: the minimum-time NLP's 7 MB takes 6 s at -O1, but compile
-time grows faster than the size (the 38 MB expanded form: 506 s; the 65 MB NLP with the
-torque rows: over 20 min and 8.5 GB of memory at -O1, and at -O0 95 s for no gain)."""
+MAX_SOURCE_BYTES = 64_000_000
+"""Larger C is not compiled. Compile time grows with the size of each function, faster
+than linearly (a whole NLP's Hessian expanded to 38 MB of SX took 506 s at -O1), and only
+linearly with constant tables: the interval library with the torque table, 36 MB of C of
+which most are the table's coefficients, compiles in 12 s."""
 
-_INTERPRETER_ONLY = ("expand",)
-"""Options a solver on a compiled library refuses (it cannot expand compiled code)."""
-
-_FUNCTION_OPTIONS = ("hessian_approximation",)
-"""The plugin's own options that change which functions it needs (its other options,
-tolerances and the like, share one library)."""
+_FORMAT = 2
+"""The libraries' layout (2: interval functions and the value's reverse); a new layout is
+a new library."""
 
 
 @dataclass
@@ -128,26 +117,34 @@ def nlp_solver(
     name: str,
     plugin: str,
     key: str,
-    build: Callable[[], dict[str, Any]],
+    names: tuple[str, ...],
+    functions: Callable[[], list[ca.Function]],
+    assemble: Callable[[list[ca.Function]], tuple[dict[str, Any], dict[str, Any]]],
     options: dict[str, Any],
     background: bool = True,
 ) -> Solver:
-    """The solver ``nlpsol(name, plugin, build(), options)``, its functions compiled.
+    """``nlpsol(name, plugin, nlp, {**options, **derivatives})`` with ``nlp, derivatives =
+    assemble(fs)``, where ``fs`` are ``functions()`` compiled.
 
-    ``key`` identifies what ``build`` returns (the dict of x, p, f, g) without calling it;
-    with ``background`` a missing library is compiled in a thread while the interpreted
-    solver is returned (:func:`wait_for_builds` waits for it), else before returning.
+    ``key`` identifies what ``functions`` returns (functions named ``names``) without
+    calling it; with ``background`` a
+    missing library is compiled in a thread while the solver returned runs the SX
+    functions (:func:`wait_for_builds` waits for it), else before returning.
     """
     started = time.perf_counter()
+
+    def solver_of(fs: list[ca.Function]) -> ca.Function:
+        nlp, derivatives = assemble(fs)
+        return ca.nlpsol(name, plugin, nlp, {**options, **derivatives})
+
     chosen = compiler()
     if chosen is None:
         _LOG.warning("no C compiler: the NLP %r runs in CasADi's interpreter", name)
-        solver = ca.nlpsol(name, plugin, build(), options)
-        return Solver(solver, INTERPRETED, time.perf_counter() - started, None)
-    library = library_path(chosen, plugin, key, options)
+        return Solver(solver_of(functions()), INTERPRETED, time.perf_counter() - started, None)
+    library = library_path(chosen, key)
 
     def load() -> ca.Function:
-        return ca.nlpsol(name, plugin, str(library), _compiled_options(options))
+        return solver_of([ca.external(function, str(library)) for function in names])
 
     if library.exists():
         try:
@@ -155,39 +152,24 @@ def nlp_solver(
         except RuntimeError as error:
             _LOG.warning("%s does not load (%s); building it again", library.name, error)
             library.unlink(missing_ok=True)
-    nlp = build()
-    solver = ca.nlpsol(name, plugin, nlp, options)
-
-    def mx_solver() -> ca.Function:  # the C comes from the MX graph: see the module docstring
-        if options.get("expand"):
-            return ca.nlpsol(name, plugin, nlp, _compiled_options(options))
-        return solver
-
-    pending = _start_build(chosen, library, mx_solver)
+    symbolic = functions()
+    pending = _start_build(chosen, library, symbolic)
     if pending is not None and not background:
         pending.result()
         if library.exists():
             return Solver(load(), COMPILED, time.perf_counter() - started, library)
+    solver = solver_of(symbolic)
     return Solver(solver, INTERPRETED, time.perf_counter() - started, library, load)
 
 
-def library_path(compiler_path: str, plugin: str, key: str, options: dict[str, Any]) -> Path:
-    """Where the library for ``key``, compiled by ``compiler_path`` with ``options``, lives."""
+def library_path(compiler_path: str, key: str) -> Path:
+    """Where the library for ``key``, compiled by ``compiler_path``, lives."""
     identity = json.dumps(
-        [
-            key,
-            ca.__version__,
-            compiler_path,
-            BUILD_FLAGS,
-            MAX_SOURCE_BYTES,
-            plugin,
-            _binary_options(plugin, options),
-        ],
+        [key, ca.__version__, compiler_path, BUILD_FLAGS, MAX_SOURCE_BYTES, _FORMAT],
         sort_keys=True,
-        default=repr,
     )
     digest = hashlib.sha256(identity.encode()).hexdigest()[:16]
-    return cache_directory() / f"nlp_{plugin}_{digest}.so"
+    return cache_directory() / f"nlp_{digest}.so"
 
 
 def wait_for_builds() -> None:
@@ -197,34 +179,14 @@ def wait_for_builds() -> None:
     wait(pending)
 
 
-def _binary_options(plugin: str, options: dict[str, Any]) -> dict[str, Any]:
-    """The options that shape the compiled functions: the generic ones but ``expand``, and
-    the plugin's :data:`_FUNCTION_OPTIONS` (given nested or dotted)."""
-    own = {k: v for k, v in options.get(plugin, {}).items() if k in _FUNCTION_OPTIONS}
-    chosen = {}
-    for option, value in options.items():
-        head, _, tail = option.partition(".")
-        if head == plugin:
-            if tail in _FUNCTION_OPTIONS:
-                own[tail] = value
-        elif option not in _INTERPRETER_ONLY:
-            chosen[option] = value
-    return {**chosen, plugin: own}
-
-
-def _compiled_options(options: dict[str, Any]) -> dict[str, Any]:
-    """``options`` without those a solver on a compiled library refuses."""
-    return {k: v for k, v in options.items() if k not in _INTERPRETER_ONLY}
-
-
-def _start_build(chosen: str, library: Path, mx_solver: Callable[[], ca.Function]) -> Future | None:
+def _start_build(chosen: str, library: Path, functions: list[ca.Function]) -> Future | None:
     """Generate the C here (CasADi is not thread-safe) and compile it in the build thread,
     unless this process has built or is building ``library``; the build's future (None
     when there is nothing to compile)."""
     with _lock:
         if library in _builds:
             return _builds[library]
-    source = _source(library, mx_solver)
+    source = _source(library, functions)
     if source is None:
         return None
     with _lock:
@@ -233,7 +195,7 @@ def _start_build(chosen: str, library: Path, mx_solver: Callable[[], ca.Function
     return future
 
 
-def _source(library: Path, mx_solver: Callable[[], ca.Function]) -> Path | None:
+def _source(library: Path, functions: list[ca.Function]) -> Path | None:
     """The C for ``library`` in a new temporary directory; None (with a warning) when it
     cannot be generated or is too big to compile, which a marker next to the library
     remembers."""
@@ -241,7 +203,7 @@ def _source(library: Path, mx_solver: Callable[[], ca.Function]) -> Path | None:
     if not too_big.exists():
         directory = Path(tempfile.mkdtemp(prefix="spm_opt_nlp_"))
         try:
-            source = _generate(mx_solver(), directory, library.stem)
+            source = _generate(functions, directory, library.stem)
         except RuntimeError as error:
             shutil.rmtree(directory, ignore_errors=True)
             _LOG.warning("no C for %s, the NLP stays interpreted: %s", library.name, error)
@@ -256,13 +218,11 @@ def _source(library: Path, mx_solver: Callable[[], ca.Function]) -> Path | None:
     return None
 
 
-def _generate(solver: ca.Function, directory: Path, stem: str) -> Path:
-    """What ``solver.generate_dependencies`` writes (the NLP and every function the plugin
-    made from it), but into ``directory`` rather than the working directory."""
+def _generate(functions: list[ca.Function], directory: Path, stem: str) -> Path:
+    """The C of ``functions`` and of the first one's reverse derivative, in ``directory``."""
     generator = ca.CodeGenerator(f"{stem}.c")
-    generator.add(solver.oracle())
-    for function in solver.get_function():
-        generator.add(solver.get_function(function))
+    for function in [*functions, functions[0].reverse(1)]:
+        generator.add(function)
     generator.generate(f"{directory}{os.sep}")
     return directory / f"{stem}.c"
 

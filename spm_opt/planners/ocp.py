@@ -35,14 +35,18 @@ where the contour-following one found 38.09 s.
 
 Solver: IPOPT (MUMPS) with an adaptive barrier, never falling back to the monotone mode
 (minimum time: 44, 40 and 50 iterations on the paper's, the five-landmark and the large
-flaps against 63, 202 and 212 with IPOPT's default globalisation, same durations). The
-torque model is the B-spline table of :mod:`spm_opt.model.torque_table` (the robot an NLP
-parameter), expanded into SX; NLPs without the torque rows are compiled to C and cached on
-disk (:mod:`nlp_library`). FATROP,
-measured on the same minimum-time problem made stage-wise (the phase durations carried as
-states; ``python benchmarks/ocp_solvers.py``): 484 iterations and 13.5 s against IPOPT's 184
-and 4.6 s on that NLP and IPOPT's 64 and 1.8 s on this module's (global durations), all
-interpreted on a loaded 2-core machine; IPOPT stays, and FATROP is not offered.
+flaps against 63, 202 and 212 with IPOPT's default globalisation, same durations). Its
+derivatives are one interval's, compiled to C once per (check points, torque rows, joint
+range) and scattered into the NLP's sparse matrices (:mod:`ocp_assembly`,
+:mod:`nlp_library`); the torque model is the B-spline table of
+:mod:`spm_opt.model.torque_table` (the robot an NLP parameter).
+
+FATROP (CasADi's structure-exploiting interior-point solver), measured on the same
+minimum-time problem made stage-wise (the phase durations carried as states; ``python
+benchmarks/ocp_solvers.py``, interpreted, idle 2-core machine): 421 iterations and 2.5 s
+with its defaults, 176 and 1.1 s with a small initial barrier and bound push (its barrier
+is monotone), about 6 ms an iteration against IPOPT's 44 iterations and 0.15 s on this
+module's NLP. IPOPT stays, and FATROP is not offered.
 
 The NLP is built once per (segments, settings that shape it, joint range) with every
 problem-dependent number (arcs, check places, robot, weights) as a parameter, so a second
@@ -71,10 +75,17 @@ from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds, planner_bounds
 from spm_opt.model import dynamics, torque_table
 from spm_opt.model.params import MM
 from spm_opt.planners.contour_guess import segment_motion
-from spm_opt.planners.nlp_library import INTERPRETED, Solver, nlp_solver
+from spm_opt.planners.nlp_library import Solver, nlp_solver
+from spm_opt.planners.ocp_assembly import (
+    HESSIAN,
+    JACOBIAN,
+    VALUE,
+    AssembledNlp,
+    assemble,
+    interval_functions,
+)
 from spm_opt.planners.ocp_transcription import (
     ARC_PARAMETERS,
-    CONTROL,
     INSIDE,
     NODE,
     STATE,
@@ -223,86 +234,79 @@ class _Nlp:
     grid: Grid
     groups: tuple[RowGroup, ...]
     checks: int
+    n_dynamics: int
 
     @property
     def rows_per_interval(self) -> int:
         return STATE + sum(group.size for group in self.groups)
 
+    def assemble(self, functions: list[ca.Function]) -> AssembledNlp:
+        """This NLP from the interval's functions (SX or compiled)."""
+        return assemble(self.grid, functions, ARC_PARAMETERS, self.checks, self.n_dynamics)
+
+
+@cache
+def _interval(checks: int, with_torque: bool, joint_range: bytes) -> ca.Function:
+    """One interval's function (:func:`interval_function`) for robots of ``joint_range``."""
+    if not with_torque:
+        return interval_function(checks, False, None, 0)
+    table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
+    n_dynamics = table.size1_in(3) + 1  # the table's values, J
+    return interval_function(checks, True, _load_torque(joint_range), n_dynamics)
+
+
+@cache
+def _interval_functions(checks: int, with_torque: bool, joint_range: bytes) -> list[ca.Function]:
+    """The interval's value, Jacobian and Hessian in SX (:func:`interval_functions`)."""
+    return interval_functions(_interval(checks, with_torque, joint_range))
+
 
 @cache
 def _nlp(segments: int, settings: OcpSettings, with_torque: bool, joint_range: bytes) -> _Nlp:
     """The NLP for ``segments`` segments, with or without the dynamics (cached per
-    process): one interval's function mapped over the grid.
+    process), assembled from one interval's functions (:mod:`ocp_assembly`).
 
     g holds, interval by interval, the continuity rows and the constraint rows of
     :func:`row_groups`, then the segment durations and the total duration; p holds every
     segment's arc, the check points' fractions, the dynamics parameters, the weights and
     the scales.
     """
+    checks = settings.checks_per_interval
+    interval = _interval(checks, with_torque, joint_range)
     grid = _grid(segments, settings)
-    m, checks = grid.intervals, settings.checks_per_interval
-    states, jerks = ca.MX.sym("x", STATE, m + 1), ca.MX.sym("u", CONTROL, m)
-    durations = ca.MX.sym("T", 3 * segments)
-    arcs = ca.MX.sym("arcs", ARC_PARAMETERS, segments)
-    fractions = ca.MX.sym("fractions", checks, m)
-    table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
-    n_dynamics = table.size1_in(3) + 1 if with_torque else 0  # the table's values, J
-    dynamics_parameters = ca.MX.sym("dynamics", n_dynamics)
-    weights, scales = ca.MX.sym("w", 3), ca.MX.sym("s", 3)
-
-    interval = interval_function(checks, with_torque, _load_torque(joint_range), n_dynamics)
-    h = (ca.DM(grid.interval_matrix) @ durations).T
-    interval_arcs = arcs @ ca.DM(np.eye(segments)[:, grid.interval_segments])
-    end, rows, integrals = interval.map(m)(
-        states[:, :-1], jerks, h, interval_arcs, fractions, dynamics_parameters
-    )
-    g = ca.vertcat(
-        ca.vec(ca.vertcat(states[:, 1:] - end, rows)),
-        ca.DM(grid.segment_matrix) @ durations,
-        ca.sum1(durations),
-    )
-    total_time = ca.sum1(durations)
-    jerk_integral, effort = ca.sum2(integrals[0, :]), ca.sum2(integrals[1, :])
-    objective = (
-        weights[0] * total_time / scales[0]
-        + weights[1] * effort / scales[1]
-        + weights[2] * jerk_integral / scales[2]
-    )
-    x = ca.vertcat(ca.vec(states), ca.vec(jerks), durations)
-    parameters = ca.vertcat(ca.vec(arcs), ca.vec(fractions), dynamics_parameters, weights, scales)
-    terms = ca.Function("terms", [x, parameters], [total_time, effort, jerk_integral])
-    return _Nlp(
-        {"x": x, "p": parameters, "f": objective, "g": g},
-        terms,
+    groups, n_dynamics = row_groups(checks, with_torque), interval.size1_in(5)
+    assembled = assemble(
         grid,
-        row_groups(checks, with_torque),
+        _interval_functions(checks, with_torque, joint_range),
+        ARC_PARAMETERS,
         checks,
+        n_dynamics,
     )
+    return _Nlp(assembled.problem, assembled.terms, grid, groups, checks, n_dynamics)
 
 
 _FORMULATION_SOURCES = (
     "planners/ocp.py",
+    "planners/ocp_assembly.py",
     "planners/ocp_transcription.py",
     "model/kinematics.py",
     "model/dynamics.py",
     "model/torque_table.py",
     "model/params.py",
 )
-"""The package's files whose code makes the NLP: a change to any of them is a new NLP."""
+"""The package's files whose code makes the interval's functions: a change to any of them
+is a new library."""
 
 
 @cache
-def _formulation_key(
-    segments: int, settings: OcpSettings, with_torque: bool, joint_range: bytes
-) -> str:
-    """What identifies :func:`_nlp`'s problem without building it: the code that builds
-    it and the settings that shape it."""
+def _interval_key(checks: int, with_torque: bool, joint_range: bytes) -> str:
+    """What identifies :func:`_interval`'s functions without building them: the code that
+    builds them and the settings that shape them."""
     package = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for name in _FORMULATION_SOURCES:
         digest.update((package / name).read_bytes())
-    shape = (settings.nodes_per_phase, settings.corner_nodes, settings.checks_per_interval)
-    digest.update(repr((segments, shape, with_torque)).encode() + joint_range)
+    digest.update(repr((checks, with_torque)).encode() + joint_range)
     return digest.hexdigest()
 
 
@@ -310,14 +314,9 @@ def _formulation_key(
 def _solver(
     segments: int, settings: OcpSettings, with_torque: bool, joint_range: bytes, warm: bool
 ) -> Solver:
-    """IPOPT on :func:`_nlp`'s problem; ``warm``: continuing from a solution and its
-    multipliers, strictly (never stopping at the acceptable level).
-
-    Without the dynamics its functions are compiled (:mod:`nlp_library`: 0.13 against
-    0.31 s of function time a minimum-time solve). With them they stay in the interpreter,
-    expanded: compiled from the MX graph, as :mod:`nlp_library` does, the torque table's
-    Hessian ran ~4× slower than the expanded interpreter (the paper's flap, minimum
-    energy: 100 s against 22 s of function time)."""
+    """IPOPT on :func:`_nlp`'s problem, its derivatives assembled from the interval's
+    compiled functions (:mod:`nlp_library`, :mod:`ocp_assembly`); ``warm``: continuing from
+    a solution and its multipliers, strictly (never stopping at the acceptable level)."""
     ipopt = {
         "max_iter": settings.max_iterations,
         "tol": settings.tolerance,
@@ -328,17 +327,21 @@ def _solver(
         "acceptable_iter": 0 if warm else settings.acceptable_iterations,
         **(_WARM_START if warm else {}),
     }
-    options = {"ipopt": ipopt, "print_time": False, "expand": True}
-    problem = _nlp(segments, settings, with_torque, joint_range).problem
-    if with_torque:
-        started = time.perf_counter()
-        solver = ca.nlpsol("ocp", "ipopt", problem, options)
-        return Solver(solver, INTERPRETED, time.perf_counter() - started, None)
+    options = {"ipopt": ipopt, "print_time": False, "calc_lam_p": False}
+    checks = settings.checks_per_interval
+    nlp = _nlp(segments, settings, with_torque, joint_range)
+
+    def solver_parts(functions: list[ca.Function]) -> tuple[dict, dict]:
+        assembled = nlp.assemble(functions)
+        return assembled.problem, assembled.derivatives
+
     return nlp_solver(
         "ocp",
         "ipopt",
-        _formulation_key(segments, settings, with_torque, joint_range),
-        lambda: problem,
+        _interval_key(checks, with_torque, joint_range),
+        (VALUE, JACOBIAN, HESSIAN),
+        lambda: _interval_functions(checks, with_torque, joint_range),
+        solver_parts,
         options,
     )
 
