@@ -53,6 +53,21 @@ def test_warm_start_from_a_solved_plan(paper_problem, min_time):
     assert so.evaluate(paper_problem, again).violations == []
 
 
+def test_a_similar_problem_continues_from_a_plans_solution(paper_problem, min_time):
+    """A faster tool (another problem, the NLP of the same shape) starts from the plan's
+    solution and multipliers: fewer iterations than from scratch, the same cut."""
+    faster = with_limits(paper_problem, max_tool_speed=3.25 * MM)
+    continued = so.plan(faster, "ocp-min-time", warm_start=min_time)
+    cold = so.plan(faster, "ocp-min-time")
+    assert continued.metadata["statistics"]["start"] == "solution"
+    assert cold.metadata["statistics"]["start"] == "motion"
+    assert so.evaluate(faster, continued).violations == []
+    iterations = [p.metadata["statistics"]["iterations"] for p in (continued, cold)]
+    assert iterations[0] < 0.6 * iterations[1]
+    assert continued.duration == pytest.approx(cold.duration, rel=1e-3)
+    assert continued.duration < 0.95 * min_time.duration
+
+
 def test_an_acceptable_level_stop_is_solved_again_strictly(paper_problem, min_time):
     """IPOPT forced to stop at its loose "acceptable" level after one such iteration
     (CasADi calls that a success): the planner continues from there to a converged

@@ -59,6 +59,7 @@ import dataclasses
 import hashlib
 import math
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -698,17 +699,30 @@ class OcpPlanner:
         fractions = np.tile(
             default_fractions(settings.checks_per_interval)[:, None], grid.intervals
         )
-        starts = [warm_start] if warm_start is not None else self._starts(problem)
+        shape = (len(problem.segment_durations), settings, with_torque, _range_key(problem))
+        starts: list[Trajectory | _Solved | None] = (
+            [warm_start] if warm_start is not None else self._starts(problem)
+        )
+        solved = _SOLVED.get(warm_start) if warm_start is not None else None
+        if solved is not None and solved.shape == shape:
+            starts.insert(0, solved)
         for number, start in enumerate(starts, 1):
-            durations = _segment_durations(problem, settings.timing, need, start)
-            x0 = _guess(problem, grid, durations, start)
             try:
-                solution = self._solve(problem, settings, bounds, fractions, with_torque, x0)
+                if isinstance(start, _Solved):  # its solution and multipliers: continue
+                    fractions = start.fractions
+                    solution = self._solve(
+                        problem, settings, bounds, fractions, with_torque, start.solution
+                    )
+                else:
+                    durations = _segment_durations(problem, settings.timing, need, start)
+                    x0 = _guess(problem, grid, durations, start)
+                    solution = self._solve(problem, settings, bounds, fractions, with_torque, x0)
                 break
             except PlanningError:
                 if number == len(starts):
                     raise
-        statistics, moved_checks = {**solution.statistics, "starts_tried": number}, 0
+        statistics = {**solution.statistics, "starts_tried": number, "start": _start_kind(start)}
+        moved_checks = 0
         for round_ in range(1, REFINEMENTS + 2):
             if not with_torque and _torque_exceeded(problem, grid, bounds, solution.x):
                 with_torque = True  # new rows: a fresh start from x
@@ -719,6 +733,7 @@ class OcpPlanner:
             trajectory = self._trajectory(problem, grid, solution.x, statistics, settings)
             broken = evaluate(problem, trajectory).violations
             if not broken:
+                _SOLVED[trajectory] = _Solved(shape, fractions, solution)
                 return trajectory
             if round_ > REFINEMENTS:
                 break
@@ -855,6 +870,39 @@ class _Solution:
     continuation: dict[str, np.ndarray]  # x0, lam_x0, lam_g0
     scales: np.ndarray  # the objective's terms at the solve's initial guess
     statistics: dict[str, Any]
+
+
+def _start_kind(start: Trajectory | _Solved | None) -> str:
+    """How a solve started: from a plan's "solution" and multipliers, a plan's "motion"
+    re-timed, or the "contour"-following guess."""
+    if isinstance(start, _Solved):
+        return "solution"
+    return "contour" if start is None else "motion"
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """A plan's last solve: what a similar problem's solve can continue from.
+
+    Attributes
+    ----------
+    shape : tuple
+        What makes its NLP: segments, settings, torque rows, joint range.
+    fractions : ndarray, shape (checks, M)
+        Its check points' places.
+    solution : _Solution
+    """
+
+    shape: tuple
+    fractions: np.ndarray
+    solution: _Solution
+
+
+_SOLVED: weakref.WeakKeyDictionary[Trajectory, _Solved] = weakref.WeakKeyDictionary()
+"""The last solve of each plan this process made and still holds: a plan given as another
+problem's warm start (a sweep's anchor) hands over its solution and multipliers, not only
+its motion, when the NLPs have the same shape (paper's flap, tool-speed limits of 2–4 mm/s:
+iterations below)."""
 
 
 def _continuation(solution: dict[str, ca.DM]) -> dict[str, np.ndarray]:
