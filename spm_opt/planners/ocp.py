@@ -9,9 +9,10 @@ integrated exactly under a constant jerk on each interval, so the returned
 boundaries; the motion starts and ends at rest. One interval's function, holding every
 constraint of :data:`~spm_opt.planners.ocp_transcription.CONSTRAINTS` (tool speed, contour
 tube and the segment's ends at the node and at ``checks_per_interval`` check points, the
-joint speed exactly through q̇'s Bernstein coefficients, the load torque at the node and
-midpoint), is mapped over the grid; joint range, acceleration and jerk are bounds on the
-nodes and controls. Each limit keeps a reserve of ``margin``.
+joint speed exactly through q̇'s Bernstein coefficients, the load torque at the two Gauss
+points, the cut's progress along its arc never negative), is mapped over the grid; joint
+range, acceleration and jerk are bounds on the nodes and controls. Each limit keeps a
+reserve of ``margin``.
 
 Every plan clean, by construction: after each solve the evaluator re-measures the plan; if
 it finds a limit exceeded, each interval where the solution exceeds a bound between its
@@ -87,6 +88,8 @@ from spm_opt.planners.ocp_assembly import (
 )
 from spm_opt.planners.ocp_transcription import (
     ARC_PARAMETERS,
+    GAUSS,
+    GAUSS_FRACTIONS,
     INSIDE,
     NODE,
     STATE,
@@ -546,6 +549,8 @@ def _place_offset(group: RowGroup, fractions: np.ndarray, interval: int) -> floa
     """Where in its interval a group's point sits, as a fraction of the interval."""
     if group.place == INSIDE:
         return float(fractions[group.point, interval])
+    if group.place == GAUSS:
+        return GAUSS_FRACTIONS[group.point]
     return 0.0 if group.place == NODE else 0.5
 
 
@@ -914,11 +919,11 @@ def _continuation(solution: dict[str, ca.DM]) -> dict[str, np.ndarray]:
 
 
 def _torque_exceeded(problem: Problem, grid: Grid, bounds: PlannerBounds, x: np.ndarray) -> bool:
-    """Whether the load torques (smooth friction, rotor inertia) at the nodes and midpoints
-    of x (where the NLP would impose them) exceed ``bounds``' torque bound."""
+    """Whether the load torques (smooth friction, rotor inertia) at the Gauss points of x's
+    intervals (where the NLP would impose them) exceed ``bounds``' torque bound."""
     motion = grid.trajectory(x, {})
     nodes = grid.node_times(grid.split(x)[2])
-    t = np.concatenate([nodes, (nodes[:-1] + nodes[1:]) / 2])
+    t = np.concatenate([nodes[:-1] + f * np.diff(nodes) for f in GAUSS_FRACTIONS])
     q, qd, qdd = motion.position(t), motion.velocity(t), motion.acceleration(t)
     torque = dynamics.inverse_dynamics(problem.robot, q, qd, qdd, exact=False)
     return bool(np.max(np.abs(torque + bounds.rotor_inertia * qdd)) > bounds.load_torque)

@@ -9,7 +9,7 @@ integrated exactly: q is a cubic in time on each interval.
 Every constraint is a row (or rows) of one interval's function, evaluated at some of its
 places: the node that starts it, check points inside it at fractions that are parameters
 (so the planner can move them to where a limit was exceeded without changing the NLP's
-shape), its midpoint, or, for the joint speed, the middle Bernstein coefficient of q̇ (q̇ is
+shape), its two Gauss points, or, for the joint speed, the middle Bernstein coefficient of q̇ (q̇ is
 quadratic on an interval: its node values and this coefficient bound it everywhere on the
 interval, exactly). :data:`CONSTRAINTS` is the one list: adding a constraint is one entry,
 and the NLP's rows, their bounds and the planner's report of the most violated one all read
@@ -79,6 +79,7 @@ class Point:
         return {
             "tool speed²": ca.sumsqr(p_dot) * rho**2 + (slope * angle_rate) ** 2,
             "chord²": 2 * rho**2 * (1 - ca.sqrt(1 - off_plane**2)),
+            "progress speed": rho * angle_rate,
             "past start": pw,
             "before end": -ca.dot(p, w_end),
         }
@@ -92,9 +93,13 @@ class Point:
         return self._torque(self.q, self.qd, self.qdd)
 
 
-NODE, INSIDE, MIDPOINT, SPEED_CONTROL = "node", "inside", "midpoint", "speed control point"
+NODE, INSIDE, GAUSS, SPEED_CONTROL = "node", "inside", "Gauss point", "speed control point"
 """The places of an interval where constraints apply: the node that starts it, the check
-points inside it, its midpoint, and q̇'s middle Bernstein coefficient."""
+points inside it, its two Gauss–Legendre points, and q̇'s middle Bernstein coefficient."""
+GAUSS_FRACTIONS = (0.5 - 3**0.5 / 6, 0.5 + 3**0.5 / 6)
+"""The two-point Gauss–Legendre rule's places in an interval, as fractions of it: where the
+effort integral and the torque limit read the torque (two table look-ups an interval, and
+exact for cubics, as Simpson's three)."""
 
 
 @dataclass(frozen=True)
@@ -178,6 +183,14 @@ CONSTRAINTS = (
         lambda bounds: ([0.0], [np.inf]),
         at_landmarks=False,
     ),
+    Constraint(  # the cut never runs back along its arc: the evaluator's backtracking
+        "backtracking",
+        "mm/s",
+        False,
+        (NODE,),
+        lambda point: point["progress speed"],
+        lambda bounds: ([0.0], [np.inf]),
+    ),
     Constraint(
         "joint speed",
         "rad/s",
@@ -191,7 +204,7 @@ CONSTRAINTS = (
         "actuator torque",
         "N·m",
         False,
-        (NODE, MIDPOINT),
+        (GAUSS,),
         lambda point: point.torque,
         lambda bounds: ([-bounds.load_torque] * 2, [bounds.load_torque] * 2),
         size=2,
@@ -294,12 +307,17 @@ def constraints(with_dynamics: bool) -> tuple[Constraint, ...]:
     return tuple(c for c in CONSTRAINTS if with_dynamics or not c.dynamics)
 
 
+def _points(place: str, checks: int) -> int:
+    """How many points of an interval a place has."""
+    return {INSIDE: checks, GAUSS: len(GAUSS_FRACTIONS)}.get(place, 1)
+
+
 def row_groups(checks: int, with_dynamics: bool) -> tuple[RowGroup, ...]:
     """The rows of one interval after its continuity rows, in order."""
     groups, start = [], 0
     for constraint in constraints(with_dynamics):
         for place in constraint.places:
-            for point in range(checks if place == INSIDE else 1):
+            for point in range(_points(place, checks)):
                 groups.append(RowGroup(constraint, place, point, start, constraint.size))
                 start += constraint.size
     return tuple(groups)
@@ -311,7 +329,7 @@ def interval_function(
     """One interval: (x (6), u (2), h (s), arc, check fractions (checks,), dynamics
     parameters) -> the state at its end (6), its constraint rows (in
     :func:`row_groups`' order), and its jerk and effort integrals (∫jerk² rad²/s⁵,
-    ∫τᵀτ N²m²s; Simpson's rule for the effort)."""
+    ∫τᵀτ N²m²s; the two-point Gauss rule for the effort)."""
     x, u, h = ca.SX.sym("x", STATE), ca.SX.sym("u", CONTROL), ca.SX.sym("h")
     arc, fractions = ca.SX.sym("arc", ARC_PARAMETERS), ca.SX.sym("fractions", checks)
     dynamics = ca.SX.sym("dynamics", n_dynamics)
@@ -328,7 +346,7 @@ def interval_function(
     places = {
         NODE: [point(x)],
         INSIDE: [point(advance(x, u, fractions[i] * h)) for i in range(checks)],
-        MIDPOINT: [point(advance(x, u, h / 2))],
+        GAUSS: [point(advance(x, u, f * h)) for f in GAUSS_FRACTIONS],
         SPEED_CONTROL: [point(speed_control)],
     }
     rows = [
@@ -337,10 +355,7 @@ def interval_function(
     ]
     effort = ca.SX(0)
     if with_dynamics:
-        node, middle, last = places[NODE][0], places[MIDPOINT][0], point(end)
-        effort = (
-            h * (ca.sumsqr(node.torque) + 4 * ca.sumsqr(middle.torque) + ca.sumsqr(last.torque)) / 6
-        )
+        effort = h * sum(ca.sumsqr(gauss.torque) for gauss in places[GAUSS]) / 2
     jerk = h * ca.sumsqr(u)
     return ca.Function(
         "interval",
