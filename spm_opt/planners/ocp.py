@@ -111,6 +111,11 @@ from spm_opt.trajectory import Trajectory
 
 MIN_CONTOUR_TOLERANCE = 1e-6
 """Narrowest contour tube the planners accept, m: a zero-width tube has no interior."""
+MIN_INTERVAL_S = 1e-3
+"""Shortest interval of the time grid, s: the evaluator's sample period. A phase squeezed
+to 1 ms in all (0.06 ms an interval: a minimum-jerk re-solve on a random flap) leaves the
+plan's samples consistent only to IPOPT's tolerance over a span too short for it, and the
+motion rebuilt from them swings (5e5 rad/s³)."""
 
 
 @dataclass(frozen=True)
@@ -515,7 +520,8 @@ def _bounds(
     low[landmarks, 0:2] = high[landmarks, 0:2] = problem.waypoint_angles
     low[[0, -1], 2:6] = high[[0, -1], 2:6] = 0.0
     longest = 20.0 * np.max(durations) + 1.0
-    lbx = np.concatenate([low.ravel(), np.full(2 * m, -jerk), np.full(3 * grid.segments, 1e-3)])
+    shortest = MIN_INTERVAL_S * np.tile(grid.counts, grid.segments)
+    lbx = np.concatenate([low.ravel(), np.full(2 * m, -jerk), shortest])
     ubx = np.concatenate([high.ravel(), np.full(2 * m, jerk), np.full(3 * grid.segments, longest)])
 
     limits = [group.constraint.limits(bounds) for group in nlp.groups]
