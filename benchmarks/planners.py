@@ -7,7 +7,7 @@ Prints a table (progress goes to stderr) and writes benchmarks/results/planners.
 
 NAMES are comma-separated planner names (default: every registered planner). The cubic
 baseline always runs, first: the ratios are against its median, measured in the same run.
-``ocp-min-energy`` takes about two minutes per solve; ``--skip ocp-min-energy`` leaves it out.
+``--skip ocp-min-energy`` leaves out the slowest planner (a few seconds a solve).
 
 First, a warm-up timed on its own (printed above the table) pays for what the planners and
 the evaluator share, so that no planner's cold call pays for it whatever the order: the
@@ -16,8 +16,9 @@ batch torque. Then, per planner, a freshly loaded problem and:
 
 - construction s: for the optimal-control (ocp-*) planners, the NLP construction: the
   ``construction_time_s`` of the first plan after clearing the ocp module's caches
-  (``_nlp``, ``_solver``, ``_probe``): building the CasADi graph and the IPOPT solver, and
-  generating the C its compiled functions are built from (the compiler then runs in the
+  (``_interval``, ``_interval_functions``, ``_interval_key``, ``_nlp``, ``_solver``,
+  ``_probe``): building the interval's functions, the NLP assembled from them and the IPOPT
+  solver, and generating the C of the interval's functions (the compiler then runs in the
   background unless the library is already in the disk cache). The other planners build
   nothing ahead: for them it is the time of the ``load_problem`` of the fresh problem (the
   JSON has ``load_s`` for every planner).
@@ -98,7 +99,14 @@ def warm_up(path: Path) -> dict[str, float]:
 
 
 def clear_ocp_caches() -> None:
-    for cached in (ocp._nlp, ocp._solver, ocp._probe):
+    for cached in (
+        ocp._interval,
+        ocp._interval_functions,
+        ocp._interval_key,
+        ocp._nlp,
+        ocp._solver,
+        ocp._probe,
+    ):
         cached.cache_clear()
 
 

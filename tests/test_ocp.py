@@ -9,6 +9,7 @@ import pytest
 import spm_opt as so
 from spm_opt.model.params import MM
 from spm_opt.planners import get_planner
+from spm_opt.sweep.spec import load_sweep_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 
@@ -256,3 +257,32 @@ def test_min_jerk_is_the_smoothest_plan_within_the_limits(paper_problem, min_ene
     assert report.max_landmark_error_mm < 0.01
     other = so.evaluate(paper_problem, min_energy)
     assert jerk_integral(report) < 0.5 * jerk_integral(other)
+
+
+def random_flap(sweep: str, planner: str, flap: int) -> so.Problem:
+    """Flap number ``flap`` of a shipped flap sweep, as its task for ``planner`` has it."""
+    task = next(
+        task
+        for task in load_sweep_spec(PROBLEMS / "sweeps" / f"{sweep}.toml").tasks()
+        if task.planner == planner and task.parameters["flap"] == flap
+    )
+    with task.problem.written() as path:
+        return so.load_problem(path, task.overrides)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("sweep", "planner", "flap"),
+    [
+        # a re-solve squeezed a middle phase to 1 ms: the rebuilt motion swung, and the
+        # next re-solve found the problem infeasible
+        ("random_flaps", "ocp-min-jerk", 10),
+        # the cut ran 0.22 mm back along the contour (tube 0.086 mm)
+        ("random_flaps_varied", "ocp-min-energy", 14),
+    ],
+)
+def test_flaps_that_once_failed_are_clean(sweep, planner, flap):
+    problem = random_flap(sweep, planner, flap)
+    report = so.evaluate(problem, so.plan(problem, planner))
+    assert report.violations == []
+    assert report.max_backtrack_mm <= 1e-6

@@ -12,16 +12,18 @@ are small SX functions that compile to C in seconds whatever the grid (one libra
 every segment count), where the NLP's own derivatives, generated from the mapped graph, are
 megabytes of C and, with the torque table, too big to compile.
 
-Measured on the paper's flap (the planners' defaults, one solve from the same start, 2
-cores), function time and solve against CasADi's derivatives of the same NLP (minimum time
-compiled from the MX graph, minimum energy interpreted in SX)::
+Measured when the assembly replaced CasADi's derivatives of the whole NLP (minimum time
+compiled from its MX graph, minimum energy interpreted in SX), on the paper's flap, one
+solve from the same start, 2 idle cores, the formulation of that day (Simpson's rule for
+the effort, no backtracking rows)::
 
     planner      iterations   functions            solve
     min-time     44 / 44      0.078 -> 0.023 s     0.23 -> 0.14 s
     min-jerk     83 / 72      0.43  -> 0.097 s     1.06 -> 0.50 s
     min-energy   122 / 117    3.3   -> 2.6 s       4.3  -> 3.6 s
 
-(min-energy's interval evaluates the torque table at three points: 27 µs an interval.)
+(min-energy's interval then read the torque table at three points, 27 µs an interval; it
+now reads it at two.)
 """
 
 from __future__ import annotations
