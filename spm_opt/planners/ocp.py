@@ -17,7 +17,8 @@ reserve of ``margin``.
 Every plan clean, by construction: after each solve the evaluator re-measures the plan; if
 it finds a limit exceeded, each interval where the solution exceeds a bound between its
 check points gets its nearest check point moved there (the check points' places are NLP
-parameters: the same NLP, continued from the solution and its multipliers), and any other
+parameters: the same NLP, continued from the solution and its multipliers; a cut found
+outside the tube there counts as the cause of the contour it left uncut), and any other
 limit the evaluator finds exceeded gets its bound tightened by the excess; up to
 :data:`REFINEMENTS` rounds, then a planning error.
 
@@ -752,6 +753,8 @@ class OcpPlanner:
             moved_checks += int(np.sum(moved != fractions))
             fractions = moved
             if round_ == 1:  # later, what moved check points did not cure is tightened
+                if "contour deviation" in found:  # the cut outside the tube: not swept in it
+                    found.add("coverage")
                 broken = [v for v in broken if v.rule not in found]
             if broken:
                 # from x alone: continuing with the multipliers of looser bounds as well
@@ -935,9 +938,12 @@ def _torque_exceeded(problem: Problem, grid: Grid, bounds: PlannerBounds, x: np.
     return bool(np.max(np.abs(torque + bounds.rotor_inertia * qdd)) > bounds.load_torque)
 
 
-REFINEMENTS = 3
-"""Re-solves, each with tighter bounds for whatever the evaluator found exceeded between
-the constraint points, before the planner gives up."""
+REFINEMENTS = 5
+"""Re-solves, each with check points moved and tighter bounds for whatever the evaluator
+found exceeded between the constraint points, before the planner gives up. A minimum-energy
+cut rides the tube's edge, and each re-solve may bulge out elsewhere: of 400 random flaps
+two needed all of three rounds or more (varied flap 101: 0.063, 0.062, 0.058 mm against
+0.057 mm, clean at the third)."""
 _TIGHTENED = {  # the evaluator's rule: the bound that keeps it
     "joint speed": "joint_speed",
     "joint acceleration": "joint_acceleration",
