@@ -36,19 +36,24 @@ their durations. On the paper's flap the near-optimal start finds 37.87 s (toppr
 where the contour-following one found 38.09 s.
 
 Solver: IPOPT (MUMPS) with an adaptive barrier, never falling back to the monotone mode
-(minimum time: 44, 40 and 50 iterations on the paper's, the five-landmark and the large
-flaps against 63, 202 and 212 with IPOPT's default globalisation, same durations). Its
-derivatives are one interval's, compiled to C once per (check points, torque rows, joint
-range) and scattered into the NLP's sparse matrices (:mod:`ocp_assembly`,
-:mod:`nlp_library`); the torque model is the B-spline table of
-:mod:`spm_opt.model.torque_table` (the robot an NLP parameter).
+(when it was chosen, minimum time took 44, 40 and 50 iterations on the paper's, the
+five-landmark and the large flaps against 63, 202 and 212 with IPOPT's default
+globalisation). Its derivatives are one interval's, compiled to C once per (check points,
+torque rows, joint range) and scattered into the NLP's sparse matrices
+(:mod:`ocp_assembly`, :mod:`nlp_library`); the torque model is the B-spline table of
+:mod:`spm_opt.model.torque_table` (the robot an NLP parameter). Starting the bound
+multipliers from a small barrier (``bound_mult_init_method`` mu-based, ``mu_init``
+1e-5–1e-3) was tried on 15 flaps from toppra's start: the median stayed at 41–52
+iterations, better on some flaps and worse on others, so IPOPT's default start stays.
 
 FATROP (CasADi's structure-exploiting interior-point solver), measured on the same
 minimum-time problem made stage-wise (the phase durations carried as states; ``python
-benchmarks/ocp_solvers.py``, interpreted, idle 2-core machine): 421 iterations and 2.5 s
-with its defaults, 176 and 1.1 s with a small initial barrier and bound push (its barrier
-is monotone), about 6 ms an iteration against IPOPT's 44 iterations and 0.15 s on this
-module's NLP. IPOPT stays, and FATROP is not offered.
+benchmarks/ocp_solvers.py``, interpreted, idle 2-core machine): with its defaults it
+stopped after 972 iterations without converging; with a small initial barrier and bound
+push (its barrier is monotone) it took 276 iterations and 1.8 s, against IPOPT's 40
+iterations and 0.13 s on this module's NLP (IPOPT on the stage-wise NLP: 405 and 3.8 s).
+IPOPT stays, and FATROP is not offered: the stage-wise form costs IPOPT ten times the
+iterations, and FATROP needs more still.
 
 The NLP is built once per (segments, settings that shape it, joint range) with every
 problem-dependent number (arcs, check places, robot, weights) as a parameter, so a second
@@ -917,8 +922,9 @@ class _Solved:
 _SOLVED: weakref.WeakKeyDictionary[Trajectory, _Solved] = weakref.WeakKeyDictionary()
 """The last solve of each plan this process made and still holds: a plan given as another
 problem's warm start (a sweep's anchor) hands over its solution and multipliers, not only
-its motion, when the NLPs have the same shape (paper's flap, tool-speed limits of 2–4 mm/s:
-iterations below)."""
+its motion, when the NLPs have the same shape. Minimum time on the paper's flap from its
+plan at 3 mm/s: 17–27 iterations at 2–3.5 mm/s against 37–53 from scratch, but 88 and 108
+at 3.75 and 4 mm/s against 44 and 74."""
 
 
 def _continuation(solution: dict[str, ca.DM]) -> dict[str, np.ndarray]:
