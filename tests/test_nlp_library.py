@@ -1,6 +1,6 @@
 """NLP solvers on compiled libraries of the functions they are assembled from: the
-interpreter's solution, a cache on disk keyed by
-the formulation, the interpreter when no compiler works, safe concurrent builds."""
+interpreter's solution, a cache on disk keyed by the formulation, the interpreter when no
+compiler works, safe concurrent builds."""
 
 import logging
 import multiprocessing

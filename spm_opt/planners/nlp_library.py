@@ -127,9 +127,9 @@ def nlp_solver(
     assemble(fs)``, where ``fs`` are ``functions()`` compiled.
 
     ``key`` identifies what ``functions`` returns (functions named ``names``) without
-    calling it; with ``background`` a
-    missing library is compiled in a thread while the solver returned runs the SX
-    functions (:func:`wait_for_builds` waits for it), else before returning.
+    calling it; with ``background`` a missing library is compiled in a thread while the
+    solver returned runs the SX functions (:func:`wait_for_builds` waits for it), else
+    before returning.
     """
     started = time.perf_counter()
 
