@@ -24,6 +24,7 @@ OPTIONAL: dict[str, tuple[str, str]] = {
     "tqdm": ("tqdm", "sweep"),
     "pyarrow": ("pyarrow", "sweep"),
     "distributed": ("distributed", "sweep"),
+    "threadpoolctl": ("threadpoolctl", "sweep"),
     "dynamixel_sdk": ("dynamixel-sdk", "hardware"),
     "serial": ("pyserial", "hardware"),
     "mujoco": ("mujoco", "verify"),

@@ -13,8 +13,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+import threadpoolctl
+
 from spm_opt.errors import InputError, PlanningError
-from spm_opt.sweep.runner import run_sweep
+from spm_opt.sweep.runner import THREAD_VARIABLES, run_sweep
 from spm_opt.sweep.task import ProblemFiles, Task
 
 NOWHERE = ProblemFiles("/nowhere.toml", "", "robot.toml", "")
@@ -56,6 +58,14 @@ def square(task: Task) -> dict[str, Any]:
         "odd": float("nan") if x % 2 else float(x),
         "big": float("inf") if x == 2 else 1.0,
     }
+
+
+def thread_settings(task: Task) -> dict[str, Any]:
+    """``square``, with the worker's thread variables (:data:`THREAD_VARIABLES`) and the
+    threads of its BLAS libraries loaded so far."""
+    blas = sorted({pool["num_threads"] for pool in threadpoolctl.threadpool_info()})
+    variables = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    return {**square(task), **variables, "blas_threads": blas}
 
 
 def fails_on_three(task: Task) -> dict[str, Any]:

@@ -30,12 +30,13 @@ from sweep_helpers import (
     returns_a_set,
     returns_text,
     square,
+    thread_settings,
 )
 
 from spm_opt.errors import InputError, PlanningError
 from spm_opt.sweep import runner
 from spm_opt.sweep.results import load_sweep, write_sweep_report
-from spm_opt.sweep.runner import SweepSummary, run_sweep
+from spm_opt.sweep.runner import THREAD_VARIABLES, SweepSummary, run_sweep, threads_per_worker
 from spm_opt.sweep.spec import load_sweep_spec
 from spm_opt.sweep.task import failure_kind
 
@@ -347,6 +348,21 @@ def test_kill_9_then_run_again_gives_every_task_once(tmp_path: Path) -> None:
     assert 3 <= written < count
     subprocess.run(command, env=environment, check=True, timeout=60)
     assert sorted(by_key(read_rows(tmp_path))) == sorted(t.key for t in grid_tasks(count))
+
+
+def test_pool_workers_share_the_cpus_among_their_threads(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    tasks = grid_tasks(4, sleep=0.0)
+    run_sweep(tasks, tmp_path, workers=2, progress=False, task_function=thread_settings)
+    share = threads_per_worker(2)
+    assert [
+        (row["OMP_NUM_THREADS"], row["OPENBLAS_NUM_THREADS"], row["blas_threads"])
+        for row in read_rows(tmp_path)
+    ] == [(str(share), str(share), [share])] * 4
+    assert threads_per_worker(10**6) == 1
 
 
 @pytest.mark.parametrize("workers", [1, 2])

@@ -30,10 +30,16 @@ The pool's workers are started from a fork server that imported ``spm_opt`` once
 1.3 s for the first pool, 0.05 s for a restart; "spawn" takes 2.7 s a pool on two cores,
 every worker importing on its own; "fork" would copy the runner's threads). A worker keeps
 its caches (compiled CasADi functions, the planners' solvers) from task to task, and ends
-with the runner, even on ``kill -9``. The pool is given two tasks per worker at a time, so
-that a worker never waits for the next and few tasks are in flight when one dies. With
-``workers=1`` and no scheduler the tasks run in this process, one after the other (what a
-debugger wants). One runner at a time writes a directory: the results file is locked.
+with the runner, even on ``kill -9``. Each worker gets its share of the CPUs for the
+threads of its libraries (:data:`THREAD_VARIABLES`, unless the environment sets them): the
+compiled batch functions' OpenMP loops and the BLAS under IPOPT's linear solver would
+otherwise each start a thread per CPU in every worker and spin against each other
+(``ocp-min-time`` on the paper's flap, 16 tasks on 2 workers and 2 CPUs: 224 against 304
+tasks a minute, 307 against 443 after the first wave; ``benchmarks/sweep.py``). The pool
+is given two tasks per worker at a time, so that a worker never waits for the next and few
+tasks are in flight when one dies. With ``workers=1`` and no scheduler the tasks run in
+this process, one after the other (what a debugger wants). One runner at a time writes a
+directory: the results file is locked.
 """
 
 from __future__ import annotations
@@ -440,6 +446,18 @@ def _rows(
 # The process pool
 
 
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+"""The environment variables a pool worker sets to its share of the CPUs (the CPUs this
+process may use over the workers, at least 1) before its libraries start their threads;
+a value the runner's environment already has is kept."""
+
+
+def threads_per_worker(workers: int) -> int:
+    """Each pool worker's share of the CPUs this process may use (at least 1)."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, (cpus or 1) // workers)
+
+
 class _Pool:
     """A process pool started from a fork server that imported spm_opt (or by "spawn"
     where there is none), restarted after a worker died. Its workers end with the runner,
@@ -447,6 +465,7 @@ class _Pool:
     wait for work forever): each watches the end of a pipe that only the runner writes."""
 
     def __init__(self, workers: int) -> None:
+        require("threadpoolctl", "the sweep's process pool")  # its workers' initializer's
         if "forkserver" in multiprocessing.get_all_start_methods():
             self._context = multiprocessing.get_context("forkserver")
             self._context.set_forkserver_preload(["__main__", "spm_opt"])  # until it runs
@@ -460,8 +479,8 @@ class _Pool:
         return ProcessPoolExecutor(
             self._workers,
             mp_context=self._context,
-            initializer=_end_with_runner,
-            initargs=(self._lifeline,),
+            initializer=_start_worker,
+            initargs=(self._lifeline, threads_per_worker(self._workers)),
         )
 
     def restart(self) -> None:
@@ -475,9 +494,16 @@ class _Pool:
         self._lifeline.close()
 
 
-def _end_with_runner(lifeline: Connection) -> None:
-    """A pool worker's initializer: end the process when the runner's end of the pipe
-    closes (the runner ended)."""
+def _start_worker(lifeline: Connection, threads: int) -> None:
+    """A pool worker's initializer: its libraries' threads (:data:`THREAD_VARIABLES`) set
+    to ``threads`` where the environment leaves them open, and the process ended when the
+    runner's end of the pipe closes (the runner ended)."""
+    if not any(variable in os.environ for variable in THREAD_VARIABLES):
+        import threadpoolctl  # optional: the sweep extra's
+
+        threadpoolctl.threadpool_limits(threads)  # NumPy's and SciPy's BLAS, loaded already
+    for variable in THREAD_VARIABLES:  # the libraries loaded later read these
+        os.environ.setdefault(variable, str(threads))
 
     def watch() -> None:
         try:
