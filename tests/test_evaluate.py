@@ -1,6 +1,7 @@
 """The evaluator on known answers, and its limit checks."""
 
 import dataclasses
+import importlib
 
 import numpy as np
 import pytest
@@ -303,3 +304,28 @@ def test_landmark_visits_are_searched_in_order_when_the_plan_does_not_say(
     assert report.violations == []
     found = [visit["time_s"] for visit in report.landmark_errors_mm]
     assert found == pytest.approx(clean_plan.landmark_times.tolist(), abs=2e-3)
+
+
+def test_a_trajectory_is_measured_once_per_problem_rate_and_landmark_times(
+    paper_problem, monkeypatch
+):
+    evaluator = importlib.import_module("spm_opt.evaluate")  # the package exports the function
+    trajectory = so.plan(paper_problem, "cubic")
+    first = so.evaluate(paper_problem, trajectory)
+    measured = []
+    measure = evaluator._measure
+    monkeypatch.setattr(
+        evaluator, "_measure", lambda *args: measured.append(args[2]) or measure(*args)
+    )
+    trajectory.metadata["planner"] = "renamed"
+    again = so.evaluate(paper_problem, trajectory)
+    assert measured == [] and again.planner == "renamed"
+    assert dataclasses.replace(again, planner=first.planner) == first
+    again.violations.clear()  # the caller's copy: the next report is whole
+    assert so.evaluate(paper_problem, trajectory).violations == first.violations
+    so.evaluate(paper_problem, trajectory, rate_hz=500.0)
+    so.evaluate(dataclasses.replace(paper_problem), trajectory)  # another problem object
+    trajectory.metadata["landmark_times_s"] = [0.0, 9.0, 20.0, 30.0, 40.0]
+    moved = so.evaluate(paper_problem, trajectory)
+    assert measured == [500.0, 1000.0, 1000.0]
+    assert moved.max_landmark_error_mm > first.max_landmark_error_mm
