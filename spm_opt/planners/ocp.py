@@ -8,9 +8,9 @@ integrated exactly under a constant jerk on each interval, so the returned
 :class:`Trajectory` reproduces the solution exactly. Landmarks are reached exactly at phase
 boundaries; the motion starts and ends at rest. One interval's function, holding every
 constraint of :data:`~spm_opt.planners.ocp_transcription.CONSTRAINTS` (tool speed, contour
-tube and the segment's ends at the node and at ``checks_per_interval`` check points, the
-joint speed exactly through q̇'s Bernstein coefficients, the load torque at the two Gauss
-points, the cut's progress along its arc never negative), is mapped over the grid; joint
+tube, the segment's ends and the cut's progress along its arc, never negative, at the node
+and at ``checks_per_interval`` check points, the joint speed exactly through q̇'s Bernstein
+coefficients, the load torque at the two Gauss points), is mapped over the grid; joint
 range, acceleration and jerk are bounds on the nodes and controls. Each limit keeps a
 reserve of ``margin``.
 
