@@ -24,7 +24,7 @@ from spm_opt.model.kinematics import Vec, add, cross, scale
 from spm_opt.model.params import Robot
 
 _BODY_NAMES = ("upper_platform", "lower_platform", "upper_arc", "lower_arc")
-_PARAMETERS = (
+PARAMETER_NAMES = (
     [f"{body}.{item}" for body in _BODY_NAMES for item in ("mass", "com_radius")]
     + [
         f"{body}.inertia.{ij}"
@@ -66,8 +66,8 @@ class _Symbols:
 
 
 def _parameters() -> _Symbols:
-    vector = ca.SX.sym("parameters", len(_PARAMETERS))
-    at = {name: vector[k] for k, name in enumerate(_PARAMETERS)}
+    vector = ca.SX.sym("parameters", len(PARAMETER_NAMES))
+    at = {name: vector[k] for k, name in enumerate(PARAMETER_NAMES)}
     inertias = {}
     for body in _BODY_NAMES:
         xx, yy, zz, xy, xz, yz = (
@@ -270,6 +270,12 @@ def _model() -> _Model:
         ["mass", "bias", "slide_map", "friction_map"],
     )
     return _Model(torque, multipliers, energy, friction_forces, plant)
+
+
+def torque_function() -> ca.Function:
+    """The symbolic model's torques: (q, q̇, q̈, :func:`parameter_vector`) -> frictionless,
+    smooth-friction and exact-friction parts (2 each, N·m), one sample per column."""
+    return _model().torque
 
 
 @cache
