@@ -130,7 +130,7 @@ def main() -> None:
     planner = so.PLANNERS["ocp-min-time"]
     settings = planner.settings(problem)
     joint_range = ocp._range_key(problem)
-    nlp = ocp._nlp(len(problem.segment_durations), settings, False, joint_range)
+    nlp = ocp._nlp(len(problem.segment_durations), settings, False, joint_range, frozenset())
     grid = nlp.grid
     start = so.plan(problem, "toppra")
     x0 = ocp._guess(problem, grid, np.diff(start.metadata["landmark_times_s"]), start)
@@ -143,7 +143,7 @@ def main() -> None:
     )
     ipopt = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive", "tol": settings.tolerance}
     global_form = ocp._solver(
-        len(problem.segment_durations), settings, False, joint_range, warm=False
+        len(problem.segment_durations), settings, False, joint_range, frozenset(), warm=False
     )
     nlp_library.wait_for_builds()
     parameters = ocp._parameters(problem, fractions, weights, scales, False)

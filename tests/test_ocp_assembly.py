@@ -8,7 +8,7 @@ import pytest
 
 from spm_opt.planners import ocp
 from spm_opt.planners.ocp_assembly import assemble, interval_functions
-from spm_opt.planners.ocp_transcription import ARC_PARAMETERS, STATE, Grid
+from spm_opt.planners.ocp_transcription import ARC_PARAMETERS, ON_DEMAND, STATE, Grid
 
 
 def plain_nlp(grid: Grid, interval: ca.Function, checks: int, n_dynamics: int) -> dict:
@@ -39,11 +39,11 @@ def plain_nlp(grid: Grid, interval: ca.Function, checks: int, n_dynamics: int) -
     return {"x": x, "p": p, "f": f, "g": g}
 
 
-@pytest.mark.parametrize("with_torque", [False, True])
-def test_assembled_derivatives_are_casadis(paper_problem, with_torque):
+@pytest.mark.parametrize(("with_torque", "demanded"), [(False, frozenset()), (True, ON_DEMAND)])
+def test_assembled_derivatives_are_casadis(paper_problem, with_torque, demanded):
     checks, grid = 2, Grid(len(paper_problem.segment_durations), (2, 3, 2))
     joint_range = ocp._range_key(paper_problem)
-    interval = ocp._interval(checks, with_torque, joint_range)
+    interval = ocp._interval(checks, with_torque, joint_range, demanded)
     n_dynamics = interval.size1_in(5)
     assembled = assemble(grid, interval_functions(interval), ARC_PARAMETERS, checks, n_dynamics)
     plain = plain_nlp(grid, interval, checks, n_dynamics)

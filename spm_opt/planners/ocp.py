@@ -98,6 +98,7 @@ from spm_opt.planners.ocp_transcription import (
     GAUSS_FRACTIONS,
     INSIDE,
     NODE,
+    ON_DEMAND,
     STATE,
     UNLIMITED,
     Grid,
@@ -263,23 +264,34 @@ class _Nlp:
 
 
 @cache
-def _interval(checks: int, with_torque: bool, joint_range: bytes) -> ca.Function:
-    """One interval's function (:func:`interval_function`) for robots of ``joint_range``."""
+def _interval(
+    checks: int, with_torque: bool, joint_range: bytes, demanded: frozenset[str]
+) -> ca.Function:
+    """One interval's function (:func:`interval_function`) for robots of ``joint_range``,
+    with the on-demand rows of the constraints ``demanded``."""
     if not with_torque:
-        return interval_function(checks, False, None, 0)
+        return interval_function(checks, False, None, 0, demanded)
     table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
     n_dynamics = table.size1_in(3) + 1  # the table's values, J
-    return interval_function(checks, True, _load_torque(joint_range), n_dynamics)
+    return interval_function(checks, True, _load_torque(joint_range), n_dynamics, demanded)
 
 
 @cache
-def _interval_functions(checks: int, with_torque: bool, joint_range: bytes) -> list[ca.Function]:
+def _interval_functions(
+    checks: int, with_torque: bool, joint_range: bytes, demanded: frozenset[str]
+) -> list[ca.Function]:
     """The interval's value, Jacobian and Hessian in SX (:func:`interval_functions`)."""
-    return interval_functions(_interval(checks, with_torque, joint_range))
+    return interval_functions(_interval(checks, with_torque, joint_range, demanded))
 
 
 @cache
-def _nlp(segments: int, settings: OcpSettings, with_torque: bool, joint_range: bytes) -> _Nlp:
+def _nlp(
+    segments: int,
+    settings: OcpSettings,
+    with_torque: bool,
+    joint_range: bytes,
+    demanded: frozenset[str],
+) -> _Nlp:
     """The NLP for ``segments`` segments, with or without the dynamics (cached per
     process), assembled from one interval's functions (:mod:`ocp_assembly`).
 
@@ -289,12 +301,12 @@ def _nlp(segments: int, settings: OcpSettings, with_torque: bool, joint_range: b
     the scales.
     """
     checks = settings.checks_per_interval
-    interval = _interval(checks, with_torque, joint_range)
+    interval = _interval(checks, with_torque, joint_range, demanded)
     grid = _grid(segments, settings)
-    groups, n_dynamics = row_groups(checks, with_torque), interval.size1_in(5)
+    groups, n_dynamics = row_groups(checks, with_torque, demanded), interval.size1_in(5)
     assembled = assemble(
         grid,
-        _interval_functions(checks, with_torque, joint_range),
+        _interval_functions(checks, with_torque, joint_range, demanded),
         ARC_PARAMETERS,
         checks,
         n_dynamics,
@@ -316,20 +328,27 @@ is a new library."""
 
 
 @cache
-def _interval_key(checks: int, with_torque: bool, joint_range: bytes) -> str:
+def _interval_key(
+    checks: int, with_torque: bool, joint_range: bytes, demanded: frozenset[str]
+) -> str:
     """What identifies :func:`_interval`'s functions without building them: the code that
     builds them and the settings that shape them."""
     package = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for name in _FORMULATION_SOURCES:
         digest.update((package / name).read_bytes())
-    digest.update(repr((checks, with_torque)).encode() + joint_range)
+    digest.update(repr((checks, with_torque, sorted(demanded))).encode() + joint_range)
     return digest.hexdigest()
 
 
 @cache
 def _solver(
-    segments: int, settings: OcpSettings, with_torque: bool, joint_range: bytes, warm: bool
+    segments: int,
+    settings: OcpSettings,
+    with_torque: bool,
+    joint_range: bytes,
+    demanded: frozenset[str],
+    warm: bool,
 ) -> Solver:
     """IPOPT on :func:`_nlp`'s problem, its derivatives assembled from the interval's
     compiled functions (:mod:`nlp_library`, :mod:`ocp_assembly`); ``warm``: continuing from
@@ -346,7 +365,7 @@ def _solver(
     }
     options = {"ipopt": ipopt, "print_time": False, "calc_lam_p": False}
     checks = settings.checks_per_interval
-    nlp = _nlp(segments, settings, with_torque, joint_range)
+    nlp = _nlp(segments, settings, with_torque, joint_range, demanded)
 
     def solver_parts(functions: list[ca.Function]) -> tuple[dict, dict]:
         assembled = nlp.assemble(functions)
@@ -355,9 +374,9 @@ def _solver(
     return nlp_solver(
         "ocp",
         "ipopt",
-        _interval_key(checks, with_torque, joint_range),
+        _interval_key(checks, with_torque, joint_range, demanded),
         (VALUE, JACOBIAN, HESSIAN),
-        lambda: _interval_functions(checks, with_torque, joint_range),
+        lambda: _interval_functions(checks, with_torque, joint_range, demanded),
         solver_parts,
         options,
     )
@@ -509,7 +528,11 @@ def _check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.n
 
 
 def _bounds(
-    problem: Problem, nlp: _Nlp, bounds: PlannerBounds, timing: str, durations: np.ndarray
+    problem: Problem,
+    nlp: _Nlp,
+    bounds: PlannerBounds,
+    timing: str,
+    durations: np.ndarray,
 ) -> dict[str, np.ndarray]:
     """lbx, ubx, lbg, ubg for one problem within ``bounds`` (the problem's limits as
     :mod:`spm_opt.limits` translates them for a planner); ``durations``: the initial phase
@@ -557,6 +580,12 @@ def _bounds(
         "lbg": np.concatenate([interval_low.ravel(), segments[0], [total[0]]]),
         "ubg": np.concatenate([interval_high.ravel(), segments[1], [total[1]]]),
     }
+
+
+def _waiting(group: RowGroup, demanded: frozenset[str]) -> bool:
+    """Whether a group's rows are on demand and not yet demanded (not in the NLP)."""
+    constraint = group.constraint
+    return group.place in constraint.on_demand and constraint.name not in demanded
 
 
 def _place_offset(group: RowGroup, fractions: np.ndarray, interval: int) -> float:
@@ -638,8 +667,8 @@ def _probe(segments: int, settings: OcpSettings) -> tuple[ca.Function, tuple[Row
     """The interval function with :data:`PROBE_POINTS` check points, mapped over the grid,
     and its row groups."""
     grid = _grid(segments, settings)
-    interval = interval_function(PROBE_POINTS, False, None, 0)
-    return interval.map(grid.intervals), row_groups(PROBE_POINTS, False)
+    interval = interval_function(PROBE_POINTS, False, None, 0, ON_DEMAND)
+    return interval.map(grid.intervals), row_groups(PROBE_POINTS, False, ON_DEMAND)
 
 
 def _moved_check_points(
@@ -648,10 +677,11 @@ def _moved_check_points(
     bounds: PlannerBounds,
     x: np.ndarray,
     fractions: np.ndarray,
+    demanded: frozenset[str],
 ) -> tuple[np.ndarray, set[str]]:
     """The check fractions with, in every interval where x exceeds a bound between its
     check points, the check nearest to the worst place moved there; and the names of the
-    constraints so exceeded."""
+    constraints so exceeded (on-demand rows count once ``demanded``)."""
     grid = _grid(len(problem.segment_durations), settings)
     probe, groups = _probe(grid.segments, settings)
     states, jerks, durations = grid.split(x)
@@ -668,7 +698,7 @@ def _moved_check_points(
     worst = np.full((grid.intervals, PROBE_POINTS), -np.inf)
     found = set()
     for group in groups:
-        if group.place != INSIDE:
+        if group.place != INSIDE or _waiting(group, demanded):
             continue
         low, high = (np.asarray(v, dtype=float) for v in group.constraint.limits(bounds))
         values = rows[:, group.start : group.start + group.size]
@@ -718,6 +748,7 @@ class OcpPlanner:
         fractions = np.tile(
             default_fractions(settings.checks_per_interval)[:, None], grid.intervals
         )
+        demanded: frozenset[str] = frozenset()
         shape = (len(problem.segment_durations), settings, with_torque, _range_key(problem))
         starts: list[Trajectory | _Solved | None] = (
             [warm_start] if warm_start is not None else self._starts(problem)
@@ -728,14 +759,16 @@ class OcpPlanner:
         for number, start in enumerate(starts, 1):
             try:
                 if isinstance(start, _Solved):  # its solution and multipliers: continue
-                    fractions = start.fractions
+                    fractions, demanded = start.fractions, start.demanded
                     solution = self._solve(
-                        problem, settings, bounds, fractions, with_torque, start.solution
+                        problem, settings, bounds, fractions, with_torque, demanded, start.solution
                     )
                 else:
                     durations = _segment_durations(problem, settings.timing, need, start)
                     x0 = _guess(problem, grid, durations, start)
-                    solution = self._solve(problem, settings, bounds, fractions, with_torque, x0)
+                    solution = self._solve(
+                        problem, settings, bounds, fractions, with_torque, demanded, x0
+                    )
                 break
             except PlanningError:
                 if number == len(starts):
@@ -745,34 +778,43 @@ class OcpPlanner:
         for round_ in range(1, REFINEMENTS + 2):
             if not with_torque and _torque_exceeded(problem, grid, bounds, solution.x):
                 with_torque = True  # new rows: a fresh start from x
-                solution = self._solve(problem, settings, bounds, fractions, True, solution.x)
+                solution = self._solve(
+                    problem, settings, bounds, fractions, True, demanded, solution.x
+                )
                 statistics = _added(statistics, solution.statistics)
             statistics["refinements"] = round_ - 1
             statistics["check_points_moved"] = moved_checks
             trajectory = self._trajectory(problem, grid, solution.x, statistics, settings)
             broken = evaluate(problem, trajectory).violations
             if not broken:
-                _SOLVED[trajectory] = _Solved(shape, fractions, solution)
+                _SOLVED[trajectory] = _Solved(shape, fractions, demanded, solution)
                 return trajectory
             if round_ > REFINEMENTS:
                 break
-            moved, found = _moved_check_points(problem, settings, bounds, solution.x, fractions)
+            newly = {v.rule for v in broken if v.rule in ON_DEMAND} - demanded
+            demanded |= newly  # its rows at the check points from now on
+            moved, found = _moved_check_points(
+                problem, settings, bounds, solution.x, fractions, demanded
+            )
             moved_checks += int(np.sum(moved != fractions))
             fractions = moved
             if round_ == 1:  # later, what moved check points did not cure is tightened
                 if "contour deviation" in found:  # the cut outside the tube: not swept in it
                     found.add("coverage")
                 broken = [v for v in broken if v.rule not in found]
-            if broken:
+            broken = [v for v in broken if v.rule not in newly]
+            if broken or newly:
                 # from x alone: continuing with the multipliers of looser bounds as well
                 # halves the iterations but ends in worse optima (five landmarks: ∫τᵀτ
-                # 0.885 against 0.855)
+                # 0.885 against 0.855); new rows have none
                 bounds = _tightened(bounds, broken)
                 solution = self._solve(
-                    problem, settings, bounds, fractions, with_torque, solution.x
+                    problem, settings, bounds, fractions, with_torque, demanded, solution.x
                 )
             else:  # the same problem with a few check points moved: continue
-                solution = self._solve(problem, settings, bounds, fractions, with_torque, solution)
+                solution = self._solve(
+                    problem, settings, bounds, fractions, with_torque, demanded, solution
+                )
             statistics = _added(statistics, solution.statistics)
         raise PlanningError(
             f"{self.name}: the evaluator still finds {'; '.join(map(str, broken))} after "
@@ -818,17 +860,19 @@ class OcpPlanner:
         bounds: PlannerBounds,
         fractions: np.ndarray,
         with_torque: bool,
+        demanded: frozenset[str],
         start: np.ndarray | _Solution,
     ) -> _Solution:
         """Solve from ``start``: an initial x, or a solution to continue from with its
-        multipliers and objective scales (its NLP must have the same rows). An early stop
-        at IPOPT's acceptable level is continued strictly from there."""
+        multipliers and objective scales (its NLP must have the same rows); ``demanded``:
+        the constraints whose on-demand rows the NLP has. An early stop at IPOPT's
+        acceptable level is continued strictly from there."""
         started = time.perf_counter()
         segments = len(problem.segment_durations)
         joint_range = _range_key(problem)
-        nlp = _nlp(segments, settings, with_torque, joint_range)
+        nlp = _nlp(segments, settings, with_torque, joint_range, demanded)
         continued = isinstance(start, _Solution)
-        solver = _solver(segments, settings, with_torque, joint_range, warm=continued)
+        solver = _solver(segments, settings, with_torque, joint_range, demanded, warm=continued)
         construction = time.perf_counter() - started
         weights = [settings.time_weight, settings.energy_weight, settings.jerk_weight]
         if isinstance(start, _Solution):
@@ -846,7 +890,7 @@ class OcpPlanner:
         stats = solver.stats()
         statuses, iterations = [stats["return_status"]], int(stats["iter_count"])
         if stats["return_status"] == ACCEPTABLE:  # loose: re-solve strictly from there
-            solver = _solver(segments, settings, with_torque, joint_range, warm=True)
+            solver = _solver(segments, settings, with_torque, joint_range, demanded, warm=True)
             solution = solver(**_continuation(solution), p=parameters, **box)
             stats = solver.stats()
             statuses.append(stats["return_status"])
@@ -911,11 +955,14 @@ class _Solved:
         What makes its NLP: segments, settings, torque rows, joint range.
     fractions : ndarray, shape (checks, M)
         Its check points' places.
+    demanded : frozenset of str
+        The constraints whose on-demand rows its NLP had.
     solution : _Solution
     """
 
     shape: tuple
     fractions: np.ndarray
+    demanded: frozenset[str]
     solution: _Solution
 
 
