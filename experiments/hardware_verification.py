@@ -1,12 +1,15 @@
 """The paper's hardware verification (Section 6), end to end, without the hardware.
 
 Plans the faster craniotomy run (problems/craniotomy_hardware.toml, the paper's cubic
-via-point plan with 4 s segments), runs it through the one executor, and compares what was
+via-point plan with 4 s segments), runs it through the one executor on a robot that is
+not the planning model (problems/robots/prototype_plant.toml: other masses, friction,
+drive losses and encoder zeros, as a real prototype would have), and compares what was
 measured with the model: torques from the actuators' current against the Lagrange model
 (Figs. 19–20), measured against planned joint paths (Fig. 15), and the platform's path
 from a synthetic motion capture, registered on 8 landmarks (Figs. 25–26).
 
-    python experiments/hardware_verification.py [--backend sim|emulator] [--out DIR]
+    python experiments/hardware_verification.py [--backend sim|emulator] [--plant-robot FILE]
+                                                [--out DIR]
 
 ``sim`` (default) runs the simulated robot as fast as it computes; ``emulator`` runs
 the real Dynamixel SDK in real time against two emulated actuators on a pseudo-terminal
@@ -23,10 +26,12 @@ import numpy as np
 
 import spm_opt as so
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
+from spm_opt.model.params import load_robot
 from spm_opt.verify.hardware import write_verification
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
+PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 
 
 def main() -> int:
@@ -35,6 +40,9 @@ def main() -> int:
     parser.add_argument("--planner", default="cubic", help="planner name (default: cubic)")
     parser.add_argument("--rate", type=float, default=100.0, help="control loop rate, Hz")
     parser.add_argument("--seed", type=int, default=0, help="seed of noise and capture")
+    parser.add_argument(
+        "--plant-robot", type=Path, default=PLANT, help=f"the robot run (default {PLANT.name})"
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "hardware_verification")
     args = parser.parse_args()
 
@@ -48,14 +56,15 @@ def main() -> int:
         f"running {args.planner} ({trajectory.duration:.1f} s) on {args.backend}", file=sys.stderr
     )
     if args.backend == "sim":
-        backend = SimulatedRobot(problem.robot, start_rad=start)
+        plant = load_robot(args.plant_robot)
+        backend = SimulatedRobot(problem.robot, start_rad=start, plant_robot=plant)
         result = execute(trajectory, backend, problem, log, settings)
     else:
         from spm_opt.execution.dynamixel import DynamixelRobot
         from spm_opt.execution.emulator import spawn_emulator
 
         with spawn_emulator(
-            problem_file=PROBLEM, start_deg=np.degrees(start), seed=args.seed
+            args.plant_robot, start_deg=np.degrees(start), seed=args.seed
         ) as emulator:
             backend = DynamixelRobot(problem.robot.actuator, emulator.device)
             result = execute(trajectory, backend, problem, log, settings)

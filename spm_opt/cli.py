@@ -118,6 +118,12 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         "--baud", type=int, default=1_000_000, help="baud rate (dynamixel; default 1000000)"
     )
     execute.add_argument("--ids", default="1,2", help="actuator ids of theta1,theta2 (dynamixel)")
+    execute.add_argument(
+        "--plant-robot",
+        type=Path,
+        metavar="FILE",
+        help="robot TOML the simulated robot integrates instead of the problem's (sim)",
+    )
     execute.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="loop rate")
     execute.add_argument(
         "--approach", action="store_true", help="first move to the plan's start if away from it"
@@ -139,6 +145,12 @@ def _emulate_parser(commands: argparse._SubParsersAction) -> None:
     )
     emulate.add_argument(
         "--problem", default=PAPER_PROBLEM, type=Path, help="problem TOML whose robot is emulated"
+    )
+    emulate.add_argument(
+        "--plant-robot",
+        type=Path,
+        metavar="FILE",
+        help="robot TOML the emulated actuators drive instead of the problem's",
     )
     emulate.add_argument("--ids", default="1,2", help="actuator ids (default 1,2)")
     emulate.add_argument("--start-deg", default="0,0", metavar="A,B", help="start angles")
@@ -164,6 +176,7 @@ def _pair(text: str, option: str, kind: type) -> tuple:
 
 def _execute(args: argparse.Namespace) -> None:
     from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
+    from spm_opt.model.params import load_robot
     from spm_opt.problem import load_problem
     from spm_opt.trajectory import Trajectory
 
@@ -174,9 +187,15 @@ def _execute(args: argparse.Namespace) -> None:
         start = trajectory.position(trajectory.start_time)
         if args.start_deg is not None:
             start = np.radians(_pair(args.start_deg, "--start-deg", float))
-        backend = SimulatedRobot(problem.robot, start_rad=start, realtime=args.realtime)
+        plant = None if args.plant_robot is None else load_robot(args.plant_robot)
+        backend = SimulatedRobot(
+            problem.robot, start_rad=start, realtime=args.realtime, plant_robot=plant
+        )
     else:
         from spm_opt.execution.dynamixel import DynamixelRobot
+
+        if args.plant_robot is not None:
+            raise InputError("--plant-robot: only with --backend sim (the real robot is the plant)")
 
         if args.port is None:
             raise InputError("--port: required with --backend dynamixel (e.g. /dev/ttyUSB0)")
@@ -199,9 +218,12 @@ class ExecutionStopped(Exception):
 
 def _emulate(args: argparse.Namespace) -> None:
     from spm_opt.execution.emulator import parse_faults, serve
+    from spm_opt.model.params import load_robot
     from spm_opt.problem import load_problem
 
     robot = load_problem(args.problem).robot
+    if args.plant_robot is not None:
+        robot = load_robot(args.plant_robot)
     ids = _pair(args.ids, "--ids", int)
     start = np.radians(_pair(args.start_deg, "--start-deg", float))
     faults = parse_faults(args.fault)

@@ -58,3 +58,5 @@ def test_drive_torque_is_the_load_by_default_and_costs_with_losses():
     np.testing.assert_allclose(
         lossy.drive_torque(load, qd, qdd), [1.2 / 0.8, -0.8 * 0.8, 1.2 * 0.8]
     )
+    viscous = dataclasses.replace(L54, viscous_friction_nm_s_rad=0.25)
+    np.testing.assert_allclose(viscous.drive_torque(load, qd, qdd), load + 0.25 * qd)

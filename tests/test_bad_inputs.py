@@ -285,6 +285,16 @@ PLAN_CASES = {
         robot=(("com_radius_mm = 171.33", "com_radius_mm = nan"),),
     ),
     "robot-invalid-toml": Case(("prototype.toml", "TOML"), robot=(("[joints]", "[joints"),)),
+    "robot-encoder-offset-too-large": Case(
+        ("joints.encoder_offset_deg",),
+        robot=((THETA1, f"{THETA1}\nencoder_offset_deg = [0.0, 45.0]"),),
+    ),
+    "robot-negative-viscous-friction": Case(
+        ("actuator.viscous_friction_nm_s_per_rad",),
+        robot=(
+            ("gear_efficiency = 1.0", "gear_efficiency = 1.0\nviscous_friction_nm_s_per_rad = -1"),
+        ),
+    ),
     # options
     "unknown-planner": Case(
         ("planner", "no_such_planner"), options=("--planner", "no_such_planner")
@@ -583,6 +593,16 @@ def hardware_plan_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
             ("plan refused: theta", "acceleration step"),
             id="limit-broken",
         ),
+        pytest.param(
+            ["--plant-robot", str(ROOT / "problems" / "robots" / "missing.toml")],
+            ("missing.toml",),
+            id="plant-robot-missing",
+        ),
+        pytest.param(
+            ["--backend", "dynamixel", "--port", "/dev/null", "--plant-robot", "x.toml"],
+            ("--plant-robot: only with --backend sim",),
+            id="plant-robot-on-hardware",
+        ),
     ],
 )
 def test_bad_execute(
@@ -618,6 +638,7 @@ def test_execute_log_not_csv(
         pytest.param(["--fault", "melt:at=1"], ("fault: unknown kind 'melt'",), id="kind"),
         pytest.param(["--fault", "overload:at=1"], ("field 'id' is required",), id="no-id"),
         pytest.param(["--start-deg", "x,1"], ("--start-deg 'x,1'",), id="start"),
+        pytest.param(["--plant-robot", "missing.toml"], ("missing.toml",), id="plant-robot"),
     ],
 )
 def test_bad_emulate(

@@ -3,14 +3,21 @@ its true state (for tests) beside what its sensors report."""
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
+from spm_opt.execution import SimulatedRobot, execute, read_log
 from spm_opt.execution.plant import DynamixelPlant, StateTrace, _minimise
 from spm_opt.model import dynamics
+from spm_opt.model.params import load_robot
+
+ROBOTS = Path(__file__).resolve().parents[1] / "problems" / "robots"
 
 angles = st.floats(-0.8, 0.8)
 # no subnormal rates: at 5e-324 rad/s one of two algebraically equal slide velocities
@@ -137,3 +144,63 @@ def test_the_true_state_is_exact_where_the_sensors_quantise(paper_problem, tmp_p
     np.testing.assert_array_equal(loaded["time_s"], 0.005 * np.arange(1, 11))
     assert loaded["position_rad"][-1, 0] == plant.position_rad[0]
     np.testing.assert_array_equal(loaded["goal_rad"][-1], plant.goal_position_rad)
+
+
+def test_the_encoders_read_theta_plus_their_offset(paper_problem):
+    offset = np.array([0.01, -0.02])
+    robot = dataclasses.replace(paper_problem.robot, encoder_offset=offset)
+    start = np.array([0.3, -0.4])
+    plant = DynamixelPlant(robot, start_rad=start)
+    reading = robot.actuator.angle(plant.present_position_pulses())
+    np.testing.assert_allclose(reading, start + offset, atol=1e-5)
+    for joint in range(2):
+        plant.enable_torque(joint, True)  # holds what its encoder reads: no jump
+    plant.goal_position_rad[:] = [0.32, -0.38]
+    plant.advance_to(3.0)
+    np.testing.assert_allclose(plant.position_rad, np.array([0.32, -0.38]) - offset, atol=2e-5)
+
+
+def _run(problem, plan, tmp_path, plant_robot=None):
+    """The plan on the simulated robot: the log's time and torques, and the plant's true
+    state at the log's rows."""
+    backend = SimulatedRobot(problem.robot, start_rad=plan.position(0.0), plant_robot=plant_robot)
+    log = tmp_path / "run.csv"
+    assert execute(plan, backend, problem, log).completed
+    table, _ = read_log(log)
+    t = table["time_s"].to_numpy()
+    trace = backend.trace.arrays()
+    at_log = np.searchsorted(trace["time_s"], t + 1e-6, side="right") - 1  # the last read
+    assert np.allclose(trace["time_s"][at_log], t, atol=1e-6)
+    measured = table[["torque_theta1_nm", "torque_theta2_nm"]].to_numpy()
+    return t, measured, trace["position_rad"][at_log], trace["velocity_rad_s"][at_log]
+
+
+def _prediction_error(robot, run):
+    """RMS over the moving samples of measured − predicted torque (actuator_torque of
+    ``robot`` at the plant's true state), each smoothed over 1 s (the current's noise
+    averaged out), N·m."""
+    t, measured, q, qd = run
+    predicted = dynamics.actuator_torque(robot, q, qd, np.gradient(qd, t, axis=0))
+    window = np.ones(100) / 100
+    error = np.stack(
+        [np.convolve(column, window, mode="same") for column in (measured - predicted).T], axis=1
+    )
+    moving = np.all(np.abs(qd) > 0.01, axis=1)
+    moving[:100] = moving[-100:] = False
+    return float(np.sqrt(np.mean(error[moving] ** 2)))
+
+
+def test_the_plant_robot_drives_what_its_own_model_asks(hardware_problem, hardware_plan, tmp_path):
+    """The plant integrates forward (implicit steps, gear losses by the last step's power
+    sign); the plant robot's inverse dynamics through Actuator.drive_torque (rotor inertia,
+    viscous friction, gear efficiency) predict what it measures as well as the planning
+    model predicts a plant that is the model, and the planning model predicts it at least
+    twice as badly."""
+    model = hardware_problem.robot
+    plant = load_robot(ROBOTS / "prototype_plant.toml")
+    (tmp_path / "model").mkdir()
+    (tmp_path / "plant").mkdir()
+    floor = _prediction_error(model, _run(hardware_problem, hardware_plan, tmp_path / "model"))
+    run = _run(hardware_problem, hardware_plan, tmp_path / "plant", plant)
+    assert _prediction_error(plant, run) < 1.25 * floor
+    assert _prediction_error(model, run) > 2.0 * floor

@@ -21,10 +21,12 @@ NAMES = list(STANDARD_PARAMETERS)
 
 @pytest.fixture(scope="module")
 def robot(paper_problem):
-    """The prototype with a tool off-centre and a rotor: every fixed term at work."""
+    """The prototype with a tool off-centre, a rotor and viscous friction at the joints."""
     robot = paper_problem.robot
     payload = dataclasses.replace(robot.payload, mass=0.05, offset=np.array([0.01, -0.02, 0.03]))
-    actuator = dataclasses.replace(robot.actuator, rotor_inertia_kg_m2=2e-3)
+    actuator = dataclasses.replace(
+        robot.actuator, rotor_inertia_kg_m2=2e-3, viscous_friction_nm_s_rad=0.03
+    )
     return dataclasses.replace(robot, payload=payload, actuator=actuator)
 
 

@@ -155,6 +155,11 @@ class DynamixelPlant:
         actuator = robot.actuator
         self._actuator = actuator
         self._terms = dynamics.PlantTerms(robot)
+        self._rotor = actuator.rotor_inertia_kg_m2
+        self._damping = actuator.viscous_friction_nm_s_rad
+        self._efficiency = actuator.gear_efficiency
+        self._offset = [float(v) for v in robot.encoder_offset]
+        self._driving = [True, True]  # whether each motor drove its load in the last step
         self._rng = np.random.default_rng(self.settings.seed)
         start = np.zeros(2) if start_rad is None else np.asarray(start_rad, dtype=float)
         self.time_s = 0.0
@@ -162,7 +167,7 @@ class DynamixelPlant:
         self.velocity_rad_s = np.zeros(2)
         self.current_a = np.zeros(2)
         self._integral = np.zeros(2)
-        self.goal_position_rad = start.copy()
+        self.goal_position_rad = start + robot.encoder_offset  # in the encoders' reading
         self.torque_enabled = np.zeros(2, dtype=bool)
         self.velocity_limit_rad_s = np.full(2, actuator.rate(8000))
         self.current_limit_a = np.full(2, actuator.continuous_current_a * 1.5)
@@ -171,7 +176,7 @@ class DynamixelPlant:
         self.velocity_i_gain = np.full(2, DEFAULT_VELOCITY_I_GAIN, dtype=np.int64)
         self.hardware_error = np.zeros(2, dtype=np.int64)
         self.encoder_stuck = np.zeros(2, dtype=bool)
-        self._reported_pulses = actuator.pulses(start)
+        self._reported_pulses = actuator.pulses(start + robot.encoder_offset)
 
     def true_state(self, time_s: float) -> TrueState:
         """The exact present state (copies), labelled with ``time_s`` (s)."""
@@ -184,9 +189,10 @@ class DynamixelPlant:
 
     # ----------------------------------------------------------------- commands
     def enable_torque(self, joint: int, on: bool) -> None:
-        """Torque Enable: switching on holds the present position (goal := present)."""
+        """Torque Enable: switching on holds the present position (goal := what the
+        encoder reads)."""
         if on and not self.torque_enabled[joint]:
-            self.goal_position_rad[joint] = self.position_rad[joint]
+            self.goal_position_rad[joint] = self.position_rad[joint] + self._offset[joint]
             self._integral[joint] = 0.0
         self.torque_enabled[joint] = bool(on) and self.hardware_error[joint] == 0
 
@@ -202,8 +208,9 @@ class DynamixelPlant:
 
     # ------------------------------------------------------------------ sensors
     def present_position_pulses(self) -> np.ndarray:
-        """Present Position, pulses (signed); frozen where the encoder is stuck."""
-        live = self._actuator.pulses(self.position_rad)
+        """Present Position, pulses (signed), of θ + the encoder offset; frozen where the
+        encoder is stuck."""
+        live = self._actuator.pulses(self.position_rad + self.robot.encoder_offset)
         self._reported_pulses = np.where(self.encoder_stuck, self._reported_pulses, live)
         return self._reported_pulses.copy()
 
@@ -232,12 +239,22 @@ class DynamixelPlant:
         s, dt = self.settings, self.settings.step_s
         mass, bias, slide_map, friction = self._terms(self.position_rad, self.velocity_rad_s)
         (m00, m01), (m10, m11) = mass.tolist()
+        m00, m11 = m00 + self._rotor, m11 + self._rotor
         (a00, a01), (a10, a11) = slide_map.tolist()
         (c00, c01), (c10, c11) = friction.tolist()
         det = a00 * a11 - a01 * a10
         # C = Aᵀ diag(F): the friction torque of each slide, times Δt
         thresholds = (dt * (a11 * c00 - a10 * c10) / det, dt * (a00 * c11 - a01 * c01) / det)
-        problem = _StepProblem(((m00, m01), (m10, m11)), ((a00, a01), (a10, a11)), thresholds, dt)
+        # the load gets η τ from a motor that drives it, τ / η from one it drives back
+        share = [self._efficiency if d else 1.0 / self._efficiency for d in self._driving]
+        problem = _StepProblem(
+            ((m00, m01), (m10, m11)),
+            ((a00, a01), (a10, a11)),
+            thresholds,
+            dt,
+            (self._damping, self._damping),
+            (share[0], share[1]),
+        )
         enabled = [bool(e) for e in self.torque_enabled]
         q, v = self.position_rad.tolist(), self.velocity_rad_s.tolist()
         bias_torque = bias.tolist()
@@ -247,7 +264,8 @@ class DynamixelPlant:
                 limit = float(self.velocity_limit_rad_s[j])
                 kp = s.position_gain_per_unit * float(self.position_p_gain[j])
                 ki = s.velocity_i_gain_per_unit * float(self.velocity_i_gain[j])
-                command[j] = min(max(kp * (float(self.goal_position_rad[j]) - q[j]), -limit), limit)
+                seen = q[j] + self._offset[j]  # the actuator's own encoder
+                command[j] = min(max(kp * (float(self.goal_position_rad[j]) - seen), -limit), limit)
                 # τ = K (v_cmd − v⁺) + Ki z, the integral taken at the end of the step
                 gain[j] = s.velocity_p_gain_per_unit * float(self.velocity_p_gain[j]) + ki * dt
                 held[j] = ki * float(self._integral[j])
@@ -274,6 +292,7 @@ class DynamixelPlant:
             self.current_a[j] = current[j] if enabled[j] else 0.0
             self.position_rad[j] = q[j] + dt * new_rate[j]
             self.velocity_rad_s[j] = new_rate[j]
+            self._driving[j] = torque[j] * new_rate[j] >= 0.0
         self.time_s += dt
 
     def _current(self, torque_nm: float) -> float:
@@ -291,16 +310,27 @@ Matrix = tuple[Pair, Pair]
 
 
 class _StepProblem:
-    """One implicit step: new rates v⁺ and drive torques for τ = gain (v_cmd − v⁺) + held.
+    """One implicit step: new rates v⁺ and motor torques τ = gain (v_cmd − v⁺) + held, of
+    which the load gets s τ (``share``: the gear train's efficiency or its inverse).
 
-    v⁺ minimises ½ v⁺ᵀ W v⁺ − bᵀ v⁺ + Σ_k c_k |a_k · v⁺| with W = M + Δt diag(gain),
-    b = M v + Δt (gain v_cmd + held − bias), c_k = Δt F_k: the implicit (Moreau) step with
-    Coulomb friction on the slides a_k (rows of A). Joints with torque off are held by
-    their gear train (v⁺ = 0 there).
+    v⁺ minimises ½ v⁺ᵀ W v⁺ − bᵀ v⁺ + Σ_k c_k |a_k · v⁺| with
+    W = M + Δt diag(s gain + f_v), b = M v + Δt (s (gain v_cmd + held) − bias),
+    c_k = Δt F_k: the implicit (Moreau) step with the joints' viscous friction f_v
+    (``damping``) and Coulomb friction on the slides a_k (rows of A). Joints with torque
+    off are held by their gear train (v⁺ = 0 there).
     """
 
-    def __init__(self, mass: Matrix, slide_map: Matrix, thresholds: Pair, dt: float) -> None:
+    def __init__(
+        self,
+        mass: Matrix,
+        slide_map: Matrix,
+        thresholds: Pair,
+        dt: float,
+        damping: Pair,
+        share: Pair,
+    ) -> None:
         self.mass, self.slide_map, self.thresholds, self.dt = mass, slide_map, thresholds, dt
+        self.damping, self.share = damping, share
 
     def solve(
         self,
@@ -312,11 +342,11 @@ class _StepProblem:
         enabled: list[bool],
     ) -> tuple[list[float], list[float]]:
         (m00, m01), (m10, m11) = self.mass
-        dt = self.dt
-        weights = ((m00 + dt * gain[0], m01), (m10, m11 + dt * gain[1]))
+        dt, (f0, f1), (s0, s1) = self.dt, self.damping, self.share
+        weights = ((m00 + dt * (s0 * gain[0] + f0), m01), (m10, m11 + dt * (s1 * gain[1] + f1)))
         linear = (
-            m00 * rate[0] + m01 * rate[1] + dt * (gain[0] * command[0] + held[0] - bias[0]),
-            m10 * rate[0] + m11 * rate[1] + dt * (gain[1] * command[1] + held[1] - bias[1]),
+            m00 * rate[0] + m01 * rate[1] + dt * (s0 * (gain[0] * command[0] + held[0]) - bias[0]),
+            m10 * rate[0] + m11 * rate[1] + dt * (s1 * (gain[1] * command[1] + held[1]) - bias[1]),
         )
         new = _minimise(weights, linear, self.slide_map, self.thresholds, enabled)
         torque = [

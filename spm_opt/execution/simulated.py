@@ -18,12 +18,16 @@ class SimulatedRobot:
     Parameters
     ----------
     robot : Robot
+        The robot as the controller knows it (the actuators' units).
     start_rad : ndarray, shape (2,), rad, optional
         Where the robot rests at connection (default: θ = 0).
     settings : PlantSettings, optional
     realtime : bool
         False (default): simulated time jumps from one control period to the next, so a run
         takes as long as its computation. True: the plant follows the machine's clock.
+    plant_robot : Robot, optional
+        The robot the plant integrates (default ``robot``): a "real" robot that is not the
+        planning model (other masses, friction, rotor inertia, gear losses, encoder offset).
 
     Attributes
     ----------
@@ -38,8 +42,9 @@ class SimulatedRobot:
         start_rad: np.ndarray | None = None,
         settings: PlantSettings | None = None,
         realtime: bool = False,
+        plant_robot: Robot | None = None,
     ) -> None:
-        self.plant = DynamixelPlant(robot, settings, start_rad)
+        self.plant = DynamixelPlant(plant_robot or robot, settings, start_rad)
         self._actuator = robot.actuator
         self.realtime = realtime
         self.clock: Clock = MonotonicClock() if realtime else VirtualClock()
@@ -82,5 +87,6 @@ class SimulatedRobot:
             "backend": "simulated",
             "realtime": self.realtime,
             "plant": dataclasses.asdict(self.plant.settings),
+            "plant_robot": self.plant.robot.name,
             "plant_time_s": self.plant.time_s,
         }

@@ -4,8 +4,9 @@ Facts from ``docs/dynamixel.md``: continuous ratings, the control table's
 units, and the current↔torque map. No torque constant is published (the curve exists only
 as an image), so the map is an explicit, replaceable table: by default the line through
 (0 A, 0 N·m) and the continuous rating (1.9 A, 14.0 N·m), 7.37 N·m/A. A robot file may
-give its own table, and an optional reflected rotor inertia and gear efficiency, which are
-off by default so that the paper's results stay the paper's.
+give its own table, and an optional reflected rotor inertia, gear efficiency and viscous
+friction at the joint, which are off by default so that the paper's results stay the
+paper's.
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ class Actuator:
         Rotor inertia reflected to the output (J_rotor × gear ratio²); 0 by default.
     gear_efficiency : float
         Efficiency of the gear train in (0, 1]; 1 by default (lossless).
+    viscous_friction_nm_s_rad : float
+        Viscous friction of the joint at the output, N·m per rad/s; 0 by default.
     """
 
     model: str
@@ -83,6 +86,7 @@ class Actuator:
     current_map: CurrentTorqueMap = field(default_factory=CurrentTorqueMap)
     rotor_inertia_kg_m2: float = 0.0
     gear_efficiency: float = 1.0
+    viscous_friction_nm_s_rad: float = 0.0
 
     def pulses(self, angle_rad: np.ndarray) -> np.ndarray:
         """Goal/present position units (pulses, rounded) for angles in rad."""
@@ -113,11 +117,14 @@ class Actuator:
     ) -> np.ndarray:
         """Torque the motor side must deliver, N·m at the output, for a load torque.
 
-        Adds the reflected rotor inertia J q̈; a gear efficiency η < 1 costs 1/η when the
-        actuator drives the load (τ q̇ > 0) and η when the load drives it back.
+        Adds the reflected rotor inertia J q̈ and the joint's viscous friction f_v q̇; a gear
+        efficiency η < 1 costs 1/η when the actuator drives the load (τ q̇ > 0) and η when
+        the load drives it back.
         """
-        torque = np.asarray(load_torque_nm, dtype=float) + self.rotor_inertia_kg_m2 * np.asarray(
-            qdd
+        torque = (
+            np.asarray(load_torque_nm, dtype=float)
+            + self.rotor_inertia_kg_m2 * np.asarray(qdd)
+            + self.viscous_friction_nm_s_rad * np.asarray(qd)
         )
         if self.gear_efficiency == 1.0:
             return torque
@@ -139,4 +146,4 @@ ACTUATORS: dict[str, Actuator] = {
     ),
 }
 """Known actuator models by name: the datasheet; a robot file may override the optional
-parts (current map, rotor inertia, gear efficiency)."""
+parts (current map, rotor inertia, gear efficiency, viscous friction)."""

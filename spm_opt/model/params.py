@@ -78,6 +78,10 @@ class Robot:
         Smallest allowed value of :func:`kinematics.singularity_margin` (1 at θ = 0).
     actuator : Actuator
     gravity : float, m/s²
+    encoder_offset : ndarray, shape (2,), rad
+        What each encoder reads at the model's θ = 0 (the encoders read θ + offset). Only
+        the simulated robot applies it: a plant whose encoders are not where the model
+        thinks; a model that knew its offset would be calibrated.
     """
 
     name: str
@@ -91,6 +95,7 @@ class Robot:
     payload: Payload = field(default_factory=Payload)
     friction: Friction = field(default_factory=Friction)
     gravity: float = 9.81
+    encoder_offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     @property
     def upper_platform_radius(self) -> float:
@@ -169,6 +174,9 @@ def load_robot(path: str | Path, overrides: Mapping[str, Any] | None = None) -> 
     margin = joints.number(
         "min_singularity_margin", minimum=0.0, maximum=1.0, exclusive_minimum=True
     )
+    encoder_offset = joints.vector(
+        "encoder_offset_deg", length=2, minimum=-10.0, maximum=10.0, default=np.zeros(2)
+    )
     joints.finish()
     robot = Robot(
         name=name,
@@ -178,6 +186,7 @@ def load_robot(path: str | Path, overrides: Mapping[str, Any] | None = None) -> 
         actuator=_actuator(root.table("actuator")),
         payload=_payload(root.table("payload", required=False)),
         friction=_friction(root.table("friction", required=False)),
+        encoder_offset=encoder_offset * DEG,
     )
     root.finish()
     return robot
@@ -264,6 +273,9 @@ def _actuator(table: Table) -> Actuator:
         rotor_inertia_kg_m2=table.number("rotor_inertia_kg_m2", minimum=0.0, default=0.0),
         gear_efficiency=table.number(
             "gear_efficiency", minimum=0.0, maximum=1.0, exclusive_minimum=True, default=1.0
+        ),
+        viscous_friction_nm_s_rad=table.number(
+            "viscous_friction_nm_s_per_rad", minimum=0.0, maximum=10.0, default=0.0
         ),
     )
     table.finish()

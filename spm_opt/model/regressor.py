@@ -12,9 +12,10 @@ The standard parameters π (:data:`STANDARD_PARAMETERS`, SI):
   (Eqs. 20–22), so it is linear in these products, not in μ and the masses apart;
 - per actuator, at its output: the reflected rotor inertia J (kg·m²), viscous friction f_v
   (N·m·s/rad), Coulomb friction f_c (N·m) and a constant offset o (N·m, e.g. of the
-  current sensor): 8. The model has only J (``rotor_inertia_kg_m2``): the others are 0 in
-  :func:`standard_parameters`. A gear efficiency below 1 makes the torque piecewise in
-  the sign of the power, not linear: the regressor is for η = 1.
+  current sensor): 8. The model has J and f_v (the actuator's ``rotor_inertia_kg_m2`` and
+  ``viscous_friction_nm_s_per_rad``): f_c and o are 0 in :func:`standard_parameters`. A
+  gear efficiency below 1 makes the torque piecewise in the sign of the power, not
+  linear: the regressor is for η = 1.
 
 The lengths, gravity and the payload (a known tool: its mass and offset) stay fixed;
 τ_payload is the payload's torque without friction. The bodies' columns of Y are CasADi's
@@ -68,8 +69,8 @@ def unit(name: str) -> str:
 
 
 def standard_parameters(robot: Robot) -> np.ndarray:
-    """π of ``robot`` (:data:`STANDARD_PARAMETERS`), SI; the drive's viscous and Coulomb
-    friction and offset are 0 (the model has none)."""
+    """π of ``robot`` (:data:`STANDARD_PARAMETERS`), SI; the drives' Coulomb friction and
+    offset are 0 (the model has none)."""
     bodies = [getattr(robot, name) for name in BODIES]
     inertias = [
         [body.inertia[0, 0], body.inertia[1, 1], body.inertia[2, 2]]
@@ -81,7 +82,8 @@ def standard_parameters(robot: Robot) -> np.ndarray:
         mu * (robot.upper_platform.mass + robot.payload.mass),
         mu * robot.lower_platform.mass,
     ]
-    drive = [robot.actuator.rotor_inertia_kg_m2, 0.0, 0.0, 0.0] * 2
+    actuator = robot.actuator
+    drive = [actuator.rotor_inertia_kg_m2, actuator.viscous_friction_nm_s_rad, 0.0, 0.0] * 2
     return np.array([body.mass for body in bodies] + sum(inertias, []) + rails + drive, dtype=float)
 
 

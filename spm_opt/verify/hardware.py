@@ -319,7 +319,9 @@ def write_verification(
         compare_torques(problem, samples), compare_tracking(samples), mocap
     )
     summary["run"] = {key: header.get(key) for key in ("completed", "reason", "samples", "loop")}
-    summary["run"]["backend"] = header.get("backend", {}).get("backend")
+    backend = header.get("backend", {})
+    summary["run"]["backend"] = backend.get("backend")
+    summary["run"]["plant_robot"] = backend.get("plant_robot")  # the simulated robot's
     files = {
         out / "hardware_verification.json": json.dumps(summary, indent=2) + "\n",
         out / "hardware_verification.md": _markdown(problem, summary),
@@ -339,7 +341,9 @@ def _markdown(problem: Problem, summary: dict[str, Any]) -> str:
     lines = [
         f"# Hardware verification: {problem.name}",
         "",
-        f"Backend: {run.get('backend')}; "
+        f"Backend: {run.get('backend')}"
+        + (f" (plant: {run['plant_robot']})" if run.get("plant_robot") else "")
+        + "; "
         + ("run completed" if run.get("completed") else f"safe stop: {run.get('reason')}")
         + f"; {run.get('samples')} samples at "
         f"{loop.get('achieved_rate_hz', float('nan')):.1f} Hz, period error p99 "
