@@ -48,15 +48,16 @@ def test_table_map_with_a_no_load_offset():
 
 
 def test_drive_torque_is_the_load_by_default_and_costs_with_losses():
-    load, qd, qdd = (
-        np.array([1.0, -1.0, 1.0]),
-        np.array([1.0, 1.0, -1.0]),
-        np.array([2.0, 2.0, 2.0]),
-    )
+    """Samples (N, 2): θ1 drives, is driven back, drives backwards; θ2 the same, mirrored."""
+    load = np.array([[1.0, -1.0], [-1.0, 1.0], [1.0, -1.0]])
+    qd = np.array([[1.0, -1.0], [1.0, -1.0], [-1.0, 1.0]])
+    qdd = np.full((3, 2), 2.0)
     np.testing.assert_array_equal(L54.drive_torque(load, qd, qdd), load)
     lossy = dataclasses.replace(L54, gear_efficiency=0.8, rotor_inertia_kg_m2=0.1)
+    theta1 = [1.2 / 0.8, -0.8 * 0.8, 1.2 * 0.8]  # τ = load + J q̈, then 1/η or η
+    theta2 = [-0.8 / 0.8, 1.2 * 0.8, -0.8 * 0.8]
+    np.testing.assert_allclose(lossy.drive_torque(load, qd, qdd), np.stack([theta1, theta2], 1))
+    viscous = dataclasses.replace(L54, viscous_friction_nm_s_rad=(0.25, 0.5))
     np.testing.assert_allclose(
-        lossy.drive_torque(load, qd, qdd), [1.2 / 0.8, -0.8 * 0.8, 1.2 * 0.8]
+        viscous.drive_torque(load, qd, qdd), load + np.array([0.25, 0.5]) * qd
     )
-    viscous = dataclasses.replace(L54, viscous_friction_nm_s_rad=0.25)
-    np.testing.assert_allclose(viscous.drive_torque(load, qd, qdd), load + 0.25 * qd)

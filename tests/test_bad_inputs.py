@@ -292,7 +292,10 @@ PLAN_CASES = {
     "robot-negative-viscous-friction": Case(
         ("actuator.viscous_friction_nm_s_per_rad",),
         robot=(
-            ("gear_efficiency = 1.0", "gear_efficiency = 1.0\nviscous_friction_nm_s_per_rad = -1"),
+            (
+                "gear_efficiency = 1.0",
+                "gear_efficiency = 1.0\nviscous_friction_nm_s_per_rad = [0.1, -1]",
+            ),
         ),
     ),
     # options

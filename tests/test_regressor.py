@@ -25,7 +25,7 @@ def robot(paper_problem):
     robot = paper_problem.robot
     payload = dataclasses.replace(robot.payload, mass=0.05, offset=np.array([0.01, -0.02, 0.03]))
     actuator = dataclasses.replace(
-        robot.actuator, rotor_inertia_kg_m2=2e-3, viscous_friction_nm_s_rad=0.03
+        robot.actuator, rotor_inertia_kg_m2=2e-3, viscous_friction_nm_s_rad=(0.03, 0.05)
     )
     return dataclasses.replace(robot, payload=payload, actuator=actuator)
 

@@ -156,7 +156,7 @@ class DynamixelPlant:
         self._actuator = actuator
         self._terms = dynamics.PlantTerms(robot)
         self._rotor = actuator.rotor_inertia_kg_m2
-        self._damping = actuator.viscous_friction_nm_s_rad
+        self._damping = tuple(actuator.viscous_friction_nm_s_rad)
         self._efficiency = actuator.gear_efficiency
         self._offset = [float(v) for v in robot.encoder_offset]
         self._driving = [True, True]  # whether each motor drove its load in the last step
@@ -252,7 +252,7 @@ class DynamixelPlant:
             ((a00, a01), (a10, a11)),
             thresholds,
             dt,
-            (self._damping, self._damping),
+            self._damping,
             (share[0], share[1]),
         )
         enabled = [bool(e) for e in self.torque_enabled]

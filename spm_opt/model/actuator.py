@@ -70,8 +70,9 @@ class Actuator:
         Rotor inertia reflected to the output (J_rotor × gear ratio²); 0 by default.
     gear_efficiency : float
         Efficiency of the gear train in (0, 1]; 1 by default (lossless).
-    viscous_friction_nm_s_rad : float
-        Viscous friction of the joint at the output, N·m per rad/s; 0 by default.
+    viscous_friction_nm_s_rad : pair of float
+        Viscous friction of each joint (θ1, θ2) at the output, N·m per rad/s; 0 by
+        default.
     """
 
     model: str
@@ -86,7 +87,7 @@ class Actuator:
     current_map: CurrentTorqueMap = field(default_factory=CurrentTorqueMap)
     rotor_inertia_kg_m2: float = 0.0
     gear_efficiency: float = 1.0
-    viscous_friction_nm_s_rad: float = 0.0
+    viscous_friction_nm_s_rad: tuple[float, float] = (0.0, 0.0)
 
     def pulses(self, angle_rad: np.ndarray) -> np.ndarray:
         """Goal/present position units (pulses, rounded) for angles in rad."""
@@ -124,7 +125,7 @@ class Actuator:
         torque = (
             np.asarray(load_torque_nm, dtype=float)
             + self.rotor_inertia_kg_m2 * np.asarray(qdd)
-            + self.viscous_friction_nm_s_rad * np.asarray(qd)
+            + np.asarray(self.viscous_friction_nm_s_rad) * np.asarray(qd)
         )
         if self.gear_efficiency == 1.0:
             return torque

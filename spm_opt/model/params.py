@@ -274,8 +274,14 @@ def _actuator(table: Table) -> Actuator:
         gear_efficiency=table.number(
             "gear_efficiency", minimum=0.0, maximum=1.0, exclusive_minimum=True, default=1.0
         ),
-        viscous_friction_nm_s_rad=table.number(
-            "viscous_friction_nm_s_per_rad", minimum=0.0, maximum=10.0, default=0.0
+        viscous_friction_nm_s_rad=tuple(
+            table.vector(
+                "viscous_friction_nm_s_per_rad",
+                length=2,
+                minimum=0.0,
+                maximum=10.0,
+                default=np.zeros(2),
+            ).tolist()
         ),
     )
     table.finish()

@@ -83,7 +83,11 @@ def standard_parameters(robot: Robot) -> np.ndarray:
         mu * robot.lower_platform.mass,
     ]
     actuator = robot.actuator
-    drive = [actuator.rotor_inertia_kg_m2, actuator.viscous_friction_nm_s_rad, 0.0, 0.0] * 2
+    drive = [
+        value
+        for viscous in actuator.viscous_friction_nm_s_rad
+        for value in (actuator.rotor_inertia_kg_m2, viscous, 0.0, 0.0)
+    ]
     return np.array([body.mass for body in bodies] + sum(inertias, []) + rails + drive, dtype=float)
 
 
