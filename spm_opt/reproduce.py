@@ -212,6 +212,10 @@ class TorqueResults:
     friction_lower: np.ndarray
     friction_torque: np.ndarray
     rows: list[Table4Row]
+    multibody_friction_relative: np.ndarray
+    """Per actuator, RMS of the torques with the robot's friction, the model's minus
+    MuJoCo's (the rails' friction applied from its own body velocities), over the RMS of
+    the model's."""
     power_balance_relative: float
     """max |τ·θ̇ − d(K+U)/dt| over max |d(K+U)/dt|, without friction."""
     open_loop_deviation_deg: float
@@ -243,6 +247,10 @@ def torque_results(
 
     ours = rms(torque)
     minimal, multibody = rms(differences["minimal coordinates"]), rms(differences["MuJoCo"])
+    with_friction = dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True)
+    multibody_friction = with_friction - multibody_inverse_dynamics(
+        robot, q, qd, qdd, friction=True
+    )
     rows = [
         Table4Row(
             joint + 1,
@@ -259,12 +267,13 @@ def torque_results(
     return TorqueResults(
         t=t,
         torque=torque,
-        with_friction=dynamics.inverse_dynamics(robot, q, qd, qdd, friction=True),
+        with_friction=with_friction,
         differences=differences,
         friction_upper=upper,
         friction_lower=lower,
         friction_torque=dynamics.friction_torque(robot, q, qd),
         rows=rows,
+        multibody_friction_relative=rms(multibody_friction) / rms(with_friction),
         power_balance_relative=float(
             np.max(np.abs(np.sum(torque * qd, axis=1) - energy_rate)) / np.max(np.abs(energy_rate))
         ),
@@ -327,6 +336,10 @@ def table4_markdown(results: TorqueResults, mu: float) -> str:
         "",
         "Further checks along the same trajectory:",
         "",
+        f"- with the rails' friction (μ = {mu:g}): MuJoCo's torques, the friction forces "
+        "computed from its own body velocities, masses and frames, differ from the model's "
+        f"by {results.multibody_friction_relative[0]:.2e} and "
+        f"{results.multibody_friction_relative[1]:.2e} of their RMS (actuators 1 and 2);",
         f"- power balance without friction: max |τ·θ̇ − d(K+U)/dt| is "
         f"{results.power_balance_relative:.2e} of max |d(K+U)/dt|;",
         f"- MuJoCo's open-loop run under its own torques from {start:g} s for {length:g} s "

@@ -239,13 +239,50 @@ def equality_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     return dense[rows]
 
 
+def rail_friction(model: mujoco.MjModel, data: mujoco.MjData, robot: Robot) -> np.ndarray:
+    """Generalised forces (nv,) of the rails' Coulomb friction for the state in ``data``,
+    from MuJoCo's own quantities: each platform's sliding velocity on its rail at its
+    point on the radial axis (B for the upper platform, D for the lower: r_u and r_L along
+    the platform's z axis), (ω_platform − ω_arc) × point from the bodies' angular
+    velocities (every joint axis passes through the isocenter); the normal force the
+    platform's weight (MuJoCo's body mass, the payload's included, and gravity) along the
+    radial contact normal; the force μ N against the sliding, applied at that point."""
+    qfrc = np.zeros(model.nv)
+    weight = -float(model.opt.gravity[2])
+    for platform, arc, radius in (
+        ("upper_platform", "upper_arc", robot.upper_platform_radius),
+        ("lower_platform", "lower_arc", robot.lower_platform_radius),
+    ):
+        body, rail = model.body(platform).id, model.body(arc).id
+        radial = data.xmat[body].reshape(3, 3)[:, 2]
+        point = data.xpos[body] + radius * radial
+        sliding = np.cross(
+            _angular_velocity(model, data, body) - _angular_velocity(model, data, rail), point
+        )
+        speed = float(np.linalg.norm(sliding))
+        if speed == 0.0:
+            continue
+        normal = model.body_mass[body] * weight * radial[2]
+        force = -robot.friction.mu * normal * sliding / speed
+        mujoco.mj_applyFT(model, data, force, np.zeros(3), point, body, qfrc)
+    return qfrc
+
+
+def _angular_velocity(model: mujoco.MjModel, data: mujoco.MjData, body: int) -> np.ndarray:
+    """A body's angular velocity in the world frame, rad/s."""
+    velocity = np.zeros(6)
+    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
+    return velocity[:3]
+
+
 def _inverse_one(
-    model: mujoco.MjModel, data: mujoco.MjData, index: _Indices
+    model: mujoco.MjModel, data: mujoco.MjData, index: _Indices, applied: np.ndarray
 ) -> tuple[np.ndarray, float]:
-    """τ (2,) and the relative residual of M q̈ + bias = S τ + J_cᵀ λ for the state in data."""
+    """τ (2,) and the relative residual of M q̈ + bias = S τ + J_cᵀ λ + ``applied`` for the
+    state in data."""
     mass = np.zeros((model.nv, model.nv))
     mujoco.mj_fullM(model, data, mass)
-    lhs = mass @ data.qacc + data.qfrc_bias
+    lhs = mass @ data.qacc + data.qfrc_bias - applied
     jacobian = equality_jacobian(model, data)
     select = np.zeros((model.nv, 2))
     select[index.dof_active, [0, 1]] = 1.0
@@ -262,16 +299,17 @@ def multibody_inverse_dynamics(
     qdd: np.ndarray,
     model: mujoco.MjModel | None = None,
     return_residual: bool = False,
+    friction: bool = False,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Actuator torques (N, 2), N·m, from MuJoCo's own mass matrix, bias forces and
-    loop-closure Jacobian.
+    loop-closure Jacobian, with the rails' friction (:func:`rail_friction`) if asked.
 
     For every sample the full state (active and passive joints, passive rates and
     accelerations from differentiating the loop closure exactly) goes into MuJoCo; then
     M q̈ + bias = S τ + J_cᵀ λ, with M from ``mj_fullM``, bias = ``qfrc_bias`` and J_c the
     equality rows of ``efc_J``, is solved for τ (the actuated joints, S selects them) and
     λ by least squares: J_c has a redundant row (see the module docstring) so λ is not
-    unique, τ is. No friction.
+    unique, τ is. With ``friction`` the rails' friction forces join the right-hand side.
 
     With ``return_residual`` also the relative residual of that solve per sample (N,): it
     is zero to rounding when the passive accelerations satisfy the loop closure.
@@ -284,7 +322,8 @@ def multibody_inverse_dynamics(
     residual = np.empty(q.shape[0])
     for k in range(q.shape[0]):
         set_state(model, data, q[k], qd[k], qdd[k])
-        torque[k], residual[k] = _inverse_one(model, data, index)
+        applied = rail_friction(model, data, robot) if friction else np.zeros(model.nv)
+        torque[k], residual[k] = _inverse_one(model, data, index, applied)
     return (torque, residual) if return_residual else torque
 
 
