@@ -161,6 +161,9 @@ def _emulate_parser(commands: argparse._SubParsersAction) -> None:
         help="inject a fault (drop, crc, delay, overload, stuck, write), e.g. overload:id=1,at=3",
     )
     emulate.add_argument("--seed", type=int, default=0, help="seed of the current noise")
+    emulate.add_argument(
+        "--trace", type=Path, help="save the plant's true state here (.npz) when serving ends"
+    )
 
 
 def _pair(text: str, option: str, kind: type) -> tuple:
@@ -221,13 +224,22 @@ def _emulate(args: argparse.Namespace) -> None:
     from spm_opt.model.params import load_robot
     from spm_opt.problem import load_problem
 
-    robot = load_problem(args.problem).robot
     if args.plant_robot is not None:
         robot = load_robot(args.plant_robot)
+    else:
+        robot = load_problem(args.problem).robot
     ids = _pair(args.ids, "--ids", int)
     start = np.radians(_pair(args.start_deg, "--start-deg", float))
     faults = parse_faults(args.fault)
-    serve(robot, ids, start, faults, args.seed, announce=lambda device: print(device, flush=True))
+    serve(
+        robot,
+        ids,
+        start,
+        faults,
+        args.seed,
+        announce=lambda device: print(device, flush=True),
+        trace_path=args.trace,
+    )
 
 
 def _sweep(args: argparse.Namespace) -> None:

@@ -72,6 +72,25 @@ def sdk_sync_write(ids: tuple[int, ...], goals: list[int]) -> bytes:
 
 
 # ------------------------------------------------------------ the stuffing guard
+def test_the_clients_copies_of_the_tables_agree_with_the_emulators():
+    """The client types its addresses and protocol constants apart from the emulator's
+    (an independent check); here the two copies meet."""
+    from spm_opt.execution import protocol
+    from spm_opt.execution.emulator import MODEL_NUMBER
+    from spm_opt.execution.emulator.control_table import ITEMS
+
+    by_name = {item.name: item.address for item in ITEMS}
+    assert {name: by_name[name] for name in dynamixel.ITEM_NAMES.values()} == {
+        name: address for address, name in dynamixel.ITEM_NAMES.items()
+    }
+    assert dynamixel.ADDR_GOAL_POSITION == by_name["Goal Position"]
+    assert dynamixel.MODEL_NUMBERS["L54-50-S500-R"] == MODEL_NUMBER
+    assert dynamixel.INST_SYNC_WRITE == protocol.Instruction.SYNC_WRITE
+    assert (dynamixel.BROADCAST_ID, dynamixel.MAX_ID) == (protocol.BROADCAST_ID, protocol.MAX_ID)
+    assert dynamixel.ALERT_BIT == protocol.ALERT
+    assert protocol.HEADER.startswith(dynamixel.HEADER_PATTERN)
+
+
 def test_the_sdk_sends_ff_ff_fd_unstuffed():
     """The defect the guard exists for: -131073 goes out as FF FF FD FF, LEN unchanged."""
     packet = sdk_sync_write((1, 2), [-131073, 0])

@@ -11,6 +11,7 @@ from dynamixel_sdk import GroupSyncRead, GroupSyncWrite, PacketHandler, PortHand
 from hypothesis import given
 from hypothesis import strategies as st
 
+from spm_opt.cli import main as cli_main
 from spm_opt.errors import InputError
 from spm_opt.execution.emulator import (
     CorruptReplies,
@@ -21,7 +22,6 @@ from spm_opt.execution.emulator import (
     Overload,
     RefusedWrites,
     StuckEncoder,
-    main,
     parse_fault,
     parse_faults,
     spawn_emulator,
@@ -456,10 +456,12 @@ def test_fault_text_round_trip(fault):
 
 
 # --------------------------------------------------------------- the child process
-def test_module_entry_point_rejects_bad_input(capsys):
-    assert main(["--ids", "1"]) == 2
+def test_the_command_line_rejects_bad_input(capsys):
+    assert cli_main(["emulate", "--ids", "1"]) == 2
     assert "--ids" in capsys.readouterr().err
-    assert main(["--fault", "drop:at=x"]) == 2
+    assert cli_main(["emulate", "--ids", "3,3"]) == 2
+    assert "distinct" in capsys.readouterr().err
+    assert cli_main(["emulate", "--fault", "drop:at=x"]) == 2
 
 
 def test_spawned_emulator_serves_the_sdk(tmp_path):

@@ -66,6 +66,12 @@ except ImportError:  # not POSIX
     PORT_ERRORS = (OSError,)
 """What pyserial raises when the device goes away (termios errors are not OSErrors)."""
 
+# The client's own copy of the model number, the control table's addresses and the
+# protocol's constants, typed from the datasheet (docs/dynamixel.md) apart from the
+# emulator's control table and spm_opt.execution.protocol on purpose: the tests drive this
+# client through the official SDK against the emulator, and an address shared by both would
+# be wrong on both sides at once without a test noticing. tests/test_dynamixel.py compares
+# the two copies.
 MODEL_NUMBERS: dict[str, int] = {"L54-50-S500-R": 38152}
 """Model Number (control table address 0) of each actuator model, by ``Actuator.model``."""
 
