@@ -34,8 +34,8 @@ with the runner, even on ``kill -9``. Each worker gets its share of the CPUs for
 threads of its libraries (:data:`THREAD_VARIABLES`, unless the environment sets them): the
 compiled batch functions' OpenMP loops and the BLAS under IPOPT's linear solver would
 otherwise each start a thread per CPU in every worker and spin against each other
-(``ocp-min-time`` on the paper's flap, 16 tasks on 2 workers and 2 CPUs: 224 against 304
-tasks a minute, 307 against 443 after the first wave; ``benchmarks/sweep.py``). The pool
+(``ocp-min-time`` on the paper's flap, 16 tasks on 2 workers and 2 CPUs: 237 against 285
+tasks a minute, 324 against 432 after the first wave; ``benchmarks/sweep.py``). The pool
 is given two tasks per worker at a time, so that a worker never waits for the next and few
 tasks are in flight when one dies. With ``workers=1`` and no scheduler the tasks run in
 this process, one after the other (what a debugger wants). One runner at a time writes a
