@@ -8,9 +8,10 @@ integrated exactly under a constant jerk on each interval, so the returned
 :class:`Trajectory` reproduces the solution exactly. Landmarks are reached exactly at phase
 boundaries; the motion starts and ends at rest. One interval's function, holding every
 constraint of :data:`~spm_opt.planners.ocp_transcription.CONSTRAINTS` (tool speed, contour
-tube, the segment's ends and the cut's progress along its arc, never negative, at the node
-and at ``checks_per_interval`` check points, the joint speed exactly through q̇'s Bernstein
-coefficients, the load torque at the two Gauss points), is mapped over the grid; joint
+tube and the segment's ends at the node and at ``checks_per_interval`` check points, the
+cut's progress along its arc never negative at the node, and at the check points once the
+evaluator finds the cut running back between nodes, the joint speed exactly through q̇'s
+Bernstein coefficients, the load torque at the two Gauss points), is mapped over the grid; joint
 range, acceleration and jerk are bounds on the nodes and controls. Each limit keeps a
 reserve of ``margin``.
 
@@ -18,9 +19,10 @@ Every plan clean, by construction: after each solve the evaluator re-measures th
 it finds a limit exceeded, each interval where the solution exceeds a bound between its
 check points gets its nearest check point moved there (the check points' places are NLP
 parameters: the same NLP, continued from the solution and its multipliers; a cut found
-outside the tube there counts as the cause of the contour it left uncut), and any other
-limit the evaluator finds exceeded gets its bound tightened by the excess; up to
-:data:`REFINEMENTS` rounds, then a planning error.
+outside the tube there counts as the cause of the contour it left uncut), a limit with
+on-demand rows (backtracking) gets them at the check points (a new NLP, solved from x),
+and any other limit the evaluator finds exceeded gets its bound tightened by the excess;
+up to :data:`REFINEMENTS` rounds, then a planning error.
 
 Objectives: total time (``ocp-min-time``); ∫ τᵀτ dt (``ocp-min-energy``; with a linear
 current map this is proportional to the copper losses ∫ I²R dt); ∫ jerkᵀjerk dt

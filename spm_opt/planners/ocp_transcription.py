@@ -191,7 +191,8 @@ CONSTRAINTS = (
     # points on demand: a minimum-energy cut on varied flap 157 slowed almost to rest
     # mid-segment and ran 0.30 mm back between two nodes, but bounded there from the start
     # the rows cost minimum jerk its convergence on 2 of the first 130 random flaps
-    # (300 iterations), and minimum time its iterations on 15 of 24 flaps
+    # (300 iterations), and minimum time more iterations on 14 of 24 flaps (median 59
+    # against 50.5)
     Constraint(
         "backtracking",
         "mm/s",
