@@ -116,6 +116,9 @@ def test_a_pipe_in_a_cell_keeps_the_reproduction_tables_whole() -> None:
     assert_tables_hold_their_cells(reproduce.table3_markdown([row]), r" \|x\| < 1 ")
     table4 = reproduce.Table4Row(1, 0.11, "0.11", 1e-16, 1e-16, 1e-13, 1e-13, "1|2")
     results = SimpleNamespace(
-        rows=[table4], power_balance_relative=1e-12, open_loop_deviation_deg=1e-6
+        rows=[table4],
+        multibody_friction_relative=[1e-15, 2e-15],
+        power_balance_relative=1e-12,
+        open_loop_deviation_deg=1e-6,
     )
     assert_tables_hold_their_cells(reproduce.table4_markdown(results, 0.24), r" 1\|2 ")
