@@ -61,3 +61,7 @@ def test_drive_torque_is_the_load_by_default_and_costs_with_losses():
     np.testing.assert_allclose(
         viscous.drive_torque(load, qd, qdd), load + np.array([0.25, 0.5]) * qd
     )
+    coulomb = dataclasses.replace(L54, coulomb_friction_nm=(0.1, 0.2))
+    np.testing.assert_allclose(
+        coulomb.drive_torque(load, qd, qdd), load + np.array([0.1, 0.2]) * np.sign(qd)
+    )

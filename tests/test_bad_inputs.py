@@ -289,6 +289,10 @@ PLAN_CASES = {
         ("joints.encoder_offset_deg",),
         robot=((THETA1, f"{THETA1}\nencoder_offset_deg = [0.0, 45.0]"),),
     ),
+    "robot-coulomb-friction-not-a-pair": Case(
+        ("actuator.coulomb_friction_nm",),
+        robot=(("gear_efficiency = 1.0", "gear_efficiency = 1.0\ncoulomb_friction_nm = 0.1"),),
+    ),
     "robot-negative-viscous-friction": Case(
         ("actuator.viscous_friction_nm_s_per_rad",),
         robot=(

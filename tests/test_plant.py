@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize
 
 from spm_opt.execution import SimulatedRobot, execute, read_log
-from spm_opt.execution.plant import DynamixelPlant, StateTrace, _minimise
+from spm_opt.execution.plant import DynamixelPlant, PlantSettings, StateTrace, _minimise
 from spm_opt.model import dynamics
 from spm_opt.model.params import load_robot
 
@@ -46,23 +46,30 @@ def test_plant_terms_rebuild_the_inverse_dynamics(paper_problem, a, b, va, vb, a
     st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4),
     st.lists(st.floats(0.0, 0.5), min_size=2, max_size=2),
     st.floats(0.2, 3.0),
+    st.one_of(st.none(), st.lists(st.floats(0.0, 0.3), min_size=2, max_size=2)),
 )
-@settings(max_examples=60, deadline=None)
-def test_friction_step_is_the_minimum_of_its_convex_function(linear, a, thresholds, stiffness):
-    """Against a derivative-free minimiser of ½vᵀWv − bᵀv + Σ c_k |a_k·v|."""
+@settings(max_examples=80, deadline=None)
+def test_friction_step_is_the_minimum_of_its_convex_function(
+    linear, a, thresholds, stiffness, joint_friction
+):
+    """Against a derivative-free minimiser of ½vᵀWv − bᵀv + Σ c_k |a_k·v|: the two slides,
+    and with ``joint_friction`` the joints themselves as two more lines."""
     weights = np.array([[stiffness, 0.3], [0.3, 1.0]])
-    slide_map = np.array(a).reshape(2, 2) + np.eye(2) * 1.5  # well away from singular
-    b, c = np.array(linear), np.array(thresholds)
+    lines = np.array(a).reshape(2, 2) + np.eye(2) * 1.5  # well away from singular
+    c = np.array(thresholds)
+    if joint_friction is not None:
+        lines, c = np.vstack([lines, np.eye(2)]), np.concatenate([c, joint_friction])
+    b = np.array(linear)
 
     def value(v: np.ndarray) -> float:
-        return 0.5 * v @ weights @ v - b @ v + c @ np.abs(slide_map @ v)
+        return 0.5 * v @ weights @ v - b @ v + c @ np.abs(lines @ v)
 
     found = np.array(
         _minimise(
             tuple(map(tuple, weights)),
             tuple(b),
-            tuple(map(tuple, slide_map)),
-            tuple(c),
+            list(map(tuple, lines)),
+            list(c),
             [True, True],
         )
     )
@@ -144,6 +151,33 @@ def test_the_true_state_is_exact_where_the_sensors_quantise(paper_problem, tmp_p
     np.testing.assert_array_equal(loaded["time_s"], 0.005 * np.arange(1, 11))
     assert loaded["position_rad"][-1, 0] == plant.position_rad[0]
     np.testing.assert_array_equal(loaded["goal_rad"][-1], plant.goal_position_rad)
+
+
+def test_the_joints_coulomb_friction_costs_its_torque_against_the_motion(paper_problem):
+    """Two plants driven alike at constant rates, one with Coulomb friction in the gear
+    trains: the drive torques differ by f_c sign(q̇), what Actuator.drive_torque adds."""
+    coulomb = (0.05, 0.03)
+    rates = np.array([0.1, -0.1])
+    torques = []
+    for friction in ((0.0, 0.0), coulomb):
+        actuator = dataclasses.replace(paper_problem.robot.actuator, coulomb_friction_nm=friction)
+        plant = DynamixelPlant(
+            dataclasses.replace(paper_problem.robot, actuator=actuator),
+            PlantSettings(current_noise_a=0.0),
+            start_rad=np.array([0.1, 0.2]),
+        )
+        for joint in range(2):
+            plant.enable_torque(joint, True)
+        start, sampled = plant.goal_position_rad.copy(), []
+        for k in range(1, 2001):
+            plant.goal_position_rad[:] = start + rates * k * 1e-3
+            plant.advance_to(k * 1e-3)
+            if k > 1000:
+                sampled.append(actuator.current_map.torque(plant.current_a.copy()))
+        torques.append(np.mean(sampled, axis=0))
+    np.testing.assert_allclose(
+        torques[1] - torques[0], np.array(coulomb) * np.sign(rates), atol=1e-3
+    )
 
 
 def test_the_encoders_read_theta_plus_their_offset(paper_problem):

@@ -21,11 +21,15 @@ NAMES = list(STANDARD_PARAMETERS)
 
 @pytest.fixture(scope="module")
 def robot(paper_problem):
-    """The prototype with a tool off-centre, a rotor and viscous friction at the joints."""
+    """The prototype with a tool off-centre, a rotor and viscous and Coulomb friction at
+    the joints."""
     robot = paper_problem.robot
     payload = dataclasses.replace(robot.payload, mass=0.05, offset=np.array([0.01, -0.02, 0.03]))
     actuator = dataclasses.replace(
-        robot.actuator, rotor_inertia_kg_m2=2e-3, viscous_friction_nm_s_rad=(0.03, 0.05)
+        robot.actuator,
+        rotor_inertia_kg_m2=2e-3,
+        viscous_friction_nm_s_rad=(0.03, 0.05),
+        coulomb_friction_nm=(0.02, 0.01),
     )
     return dataclasses.replace(robot, payload=payload, actuator=actuator)
 

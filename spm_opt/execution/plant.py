@@ -32,7 +32,9 @@ post-mortems: the plant's exact joint angles and rates, without quantisation or 
 from __future__ import annotations
 
 import bisect
+import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -157,6 +159,7 @@ class DynamixelPlant:
         self._terms = dynamics.PlantTerms(robot)
         self._rotor = actuator.rotor_inertia_kg_m2
         self._damping = tuple(actuator.viscous_friction_nm_s_rad)
+        self._joint_friction = [float(f) for f in actuator.coulomb_friction_nm]
         self._efficiency = actuator.gear_efficiency
         self._offset = [float(v) for v in robot.encoder_offset]
         self._driving = [True, True]  # whether each motor drove its load in the last step
@@ -243,13 +246,17 @@ class DynamixelPlant:
         (a00, a01), (a10, a11) = slide_map.tolist()
         (c00, c01), (c10, c11) = friction.tolist()
         det = a00 * a11 - a01 * a10
-        # C = Aᵀ diag(F): the friction torque of each slide, times Δt
-        thresholds = (dt * (a11 * c00 - a10 * c10) / det, dt * (a00 * c11 - a01 * c01) / det)
+        # C = Aᵀ diag(F): the friction torque of each slide, times Δt; then the joints'
+        lines = [(a00, a01), (a10, a11)]
+        thresholds = [dt * (a11 * c00 - a10 * c10) / det, dt * (a00 * c11 - a01 * c01) / det]
+        if any(self._joint_friction):
+            lines += [(1.0, 0.0), (0.0, 1.0)]
+            thresholds += [dt * f for f in self._joint_friction]
         # the load gets η τ from a motor that drives it, τ / η from one it drives back
         share = [self._efficiency if d else 1.0 / self._efficiency for d in self._driving]
         problem = _StepProblem(
             ((m00, m01), (m10, m11)),
-            ((a00, a01), (a10, a11)),
+            lines,
             thresholds,
             dt,
             self._damping,
@@ -316,20 +323,21 @@ class _StepProblem:
     v⁺ minimises ½ v⁺ᵀ W v⁺ − bᵀ v⁺ + Σ_k c_k |a_k · v⁺| with
     W = M + Δt diag(s gain + f_v), b = M v + Δt (s (gain v_cmd + held) − bias),
     c_k = Δt F_k: the implicit (Moreau) step with the joints' viscous friction f_v
-    (``damping``) and Coulomb friction on the slides a_k (rows of A). Joints with torque
+    (``damping``) and Coulomb friction on the ``lines`` a_k (the slides, rows of A, then
+    the joints themselves when their gear trains have Coulomb friction). Joints with torque
     off are held by their gear train (v⁺ = 0 there).
     """
 
     def __init__(
         self,
         mass: Matrix,
-        slide_map: Matrix,
-        thresholds: Pair,
+        lines: list[Pair],
+        thresholds: list[float],
         dt: float,
         damping: Pair,
         share: Pair,
     ) -> None:
-        self.mass, self.slide_map, self.thresholds, self.dt = mass, slide_map, thresholds, dt
+        self.mass, self.lines, self.thresholds, self.dt = mass, lines, thresholds, dt
         self.damping, self.share = damping, share
 
     def solve(
@@ -348,7 +356,7 @@ class _StepProblem:
             m00 * rate[0] + m01 * rate[1] + dt * (s0 * (gain[0] * command[0] + held[0]) - bias[0]),
             m10 * rate[0] + m11 * rate[1] + dt * (s1 * (gain[1] * command[1] + held[1]) - bias[1]),
         )
-        new = _minimise(weights, linear, self.slide_map, self.thresholds, enabled)
+        new = _minimise(weights, linear, self.lines, self.thresholds, enabled)
         torque = [
             gain[j] * (command[j] - new[j]) + held[j] if enabled[j] else 0.0 for j in range(2)
         ]
@@ -356,31 +364,36 @@ class _StepProblem:
 
 
 def _minimise(
-    weights: Matrix, linear: Pair, slide_map: Matrix, thresholds: Pair, free: list[bool]
+    weights: Matrix,
+    linear: Pair,
+    lines: Sequence[Pair],
+    thresholds: Sequence[float],
+    free: list[bool],
 ) -> Pair:
-    """argmin over v of ½ vᵀWv − bᵀv + Σ_k c_k |a_k·v|, with v_j = 0 where not free.
+    """argmin over v of ½ vᵀWv − bᵀv + Σ_k c_k |a_k·v| (a_k: ``lines``), with v_j = 0 where
+    not free.
 
-    The minimiser of this convex function has each slide either moving (the smooth
-    stationary point of one sign pattern) or stuck (a_k·v = 0: the minimum along that
-    line): every candidate is computed in closed form and the one of least value is the
-    minimiser.
+    Every line a_k·v = 0 passes through the origin, so the minimiser of this convex
+    function is the smooth stationary point of one sign pattern (each term sliding), the
+    minimum along one line (that term stuck), or the origin: every candidate is computed in
+    closed form and the one of least value is the minimiser.
     """
     (w00, w01), (w10, w11) = weights
     b0, b1 = linear
-    (a00, a01), (a10, a11) = slide_map
-    c0, c1 = thresholds
+    terms = list(zip(lines, thresholds, strict=True))
+
+    def friction(v0: float, v1: float) -> float:
+        return sum(c * abs(a0 * v0 + a1 * v1) for (a0, a1), c in terms)
 
     def value(v0: float, v1: float) -> float:
         quadratic = 0.5 * (v0 * (w00 * v0 + w01 * v1) + v1 * (w10 * v0 + w11 * v1))
-        friction = c0 * abs(a00 * v0 + a01 * v1) + c1 * abs(a10 * v0 + a11 * v1)
-        return quadratic - b0 * v0 - b1 * v1 + friction
+        return quadratic - b0 * v0 - b1 * v1 + friction(v0, v1)
 
     def along(d0: float, d1: float) -> Pair:
         # 1-D soft threshold: min over α of ½ w α² − β α + c |α|
         w = d0 * (w00 * d0 + w01 * d1) + d1 * (w10 * d0 + w11 * d1)
         beta = b0 * d0 + b1 * d1
-        c = c0 * abs(a00 * d0 + a01 * d1) + c1 * abs(a10 * d0 + a11 * d1)
-        alpha = math.copysign(max(abs(beta) - c, 0.0), beta) / w
+        alpha = math.copysign(max(abs(beta) - friction(d0, d1), 0.0), beta) / w
         return alpha * d0, alpha * d1
 
     if not (free[0] or free[1]):
@@ -389,12 +402,14 @@ def _minimise(
         return along(1.0, 0.0) if free[0] else along(0.0, 1.0)
     det = w00 * w11 - w01 * w10
     candidates = [(0.0, 0.0)]
-    for s0, s1 in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+    for signs in itertools.product((1.0, -1.0), repeat=len(terms)):
         # W v = b − Aᵀ (c ∘ s)
-        r0 = b0 - (a00 * c0 * s0 + a10 * c1 * s1)
-        r1 = b1 - (a01 * c0 * s0 + a11 * c1 * s1)
+        r0, r1 = b0, b1
+        for ((a0, a1), c), sign in zip(terms, signs, strict=True):
+            r0 -= a0 * c * sign
+            r1 -= a1 * c * sign
         candidates.append(((w11 * r0 - w01 * r1) / det, (w00 * r1 - w10 * r0) / det))
-    for k0, k1 in ((a00, a01), (a10, a11)):
+    for (k0, k1), _ in terms:
         norm = math.hypot(k0, k1)
         candidates.append(along(-k1 / norm, k0 / norm))
     return min(candidates, key=lambda v: value(*v))

@@ -5,8 +5,8 @@ units, and the current↔torque map. No torque constant is published (the curve 
 as an image), so the map is an explicit, replaceable table: by default the line through
 (0 A, 0 N·m) and the continuous rating (1.9 A, 14.0 N·m), 7.37 N·m/A. A robot file may
 give its own table, and an optional reflected rotor inertia, gear efficiency and viscous
-friction at the joint, which are off by default so that the paper's results stay the
-paper's.
+and Coulomb friction at the joint, which are off by default so that the paper's results
+stay the paper's.
 """
 
 from __future__ import annotations
@@ -73,6 +73,9 @@ class Actuator:
     viscous_friction_nm_s_rad : pair of float
         Viscous friction of each joint (θ1, θ2) at the output, N·m per rad/s; 0 by
         default.
+    coulomb_friction_nm : pair of float
+        Coulomb friction of each joint at the output (the gear train's), N·m; 0 by
+        default.
     """
 
     model: str
@@ -88,6 +91,7 @@ class Actuator:
     rotor_inertia_kg_m2: float = 0.0
     gear_efficiency: float = 1.0
     viscous_friction_nm_s_rad: tuple[float, float] = (0.0, 0.0)
+    coulomb_friction_nm: tuple[float, float] = (0.0, 0.0)
 
     def pulses(self, angle_rad: np.ndarray) -> np.ndarray:
         """Goal/present position units (pulses, rounded) for angles in rad."""
@@ -118,14 +122,15 @@ class Actuator:
     ) -> np.ndarray:
         """Torque the motor side must deliver, N·m at the output, for a load torque.
 
-        Adds the reflected rotor inertia J q̈ and the joint's viscous friction f_v q̇; a gear
-        efficiency η < 1 costs 1/η when the actuator drives the load (τ q̇ > 0) and η when
-        the load drives it back.
+        Adds the reflected rotor inertia J q̈ and the joint's viscous and Coulomb friction
+        f_v q̇ + f_c sign(q̇); a gear efficiency η < 1 costs 1/η when the actuator drives the
+        load (τ q̇ > 0) and η when the load drives it back.
         """
         torque = (
             np.asarray(load_torque_nm, dtype=float)
             + self.rotor_inertia_kg_m2 * np.asarray(qdd)
             + np.asarray(self.viscous_friction_nm_s_rad) * np.asarray(qd)
+            + np.asarray(self.coulomb_friction_nm) * np.sign(qd)
         )
         if self.gear_efficiency == 1.0:
             return torque
@@ -147,4 +152,4 @@ ACTUATORS: dict[str, Actuator] = {
     ),
 }
 """Known actuator models by name: the datasheet; a robot file may override the optional
-parts (current map, rotor inertia, gear efficiency, viscous friction)."""
+parts (current map, rotor inertia, gear efficiency, viscous and Coulomb friction)."""

@@ -283,6 +283,11 @@ def _actuator(table: Table) -> Actuator:
                 default=np.zeros(2),
             ).tolist()
         ),
+        coulomb_friction_nm=tuple(
+            table.vector(
+                "coulomb_friction_nm", length=2, minimum=0.0, maximum=10.0, default=np.zeros(2)
+            ).tolist()
+        ),
     )
     table.finish()
     return actuator

@@ -12,8 +12,9 @@ The standard parameters π (:data:`STANDARD_PARAMETERS`, SI):
   (Eqs. 20–22), so it is linear in these products, not in μ and the masses apart;
 - per actuator, at its output: the reflected rotor inertia J (kg·m²), viscous friction f_v
   (N·m·s/rad), Coulomb friction f_c (N·m) and a constant offset o (N·m, e.g. of the
-  current sensor): 8. The model has J and f_v (the actuator's ``rotor_inertia_kg_m2`` and
-  ``viscous_friction_nm_s_per_rad``): f_c and o are 0 in :func:`standard_parameters`. A
+  current sensor): 8. The model has J, f_v and f_c (the actuator's
+  ``rotor_inertia_kg_m2``, ``viscous_friction_nm_s_per_rad`` and ``coulomb_friction_nm``):
+  o is 0 in :func:`standard_parameters`. A
   gear efficiency below 1 makes the torque piecewise in the sign of the power, not
   linear: the regressor is for η = 1.
 
@@ -69,8 +70,8 @@ def unit(name: str) -> str:
 
 
 def standard_parameters(robot: Robot) -> np.ndarray:
-    """π of ``robot`` (:data:`STANDARD_PARAMETERS`), SI; the drives' Coulomb friction and
-    offset are 0 (the model has none)."""
+    """π of ``robot`` (:data:`STANDARD_PARAMETERS`), SI; the drives' offsets are 0 (the
+    model has none)."""
     bodies = [getattr(robot, name) for name in BODIES]
     inertias = [
         [body.inertia[0, 0], body.inertia[1, 1], body.inertia[2, 2]]
@@ -85,8 +86,10 @@ def standard_parameters(robot: Robot) -> np.ndarray:
     actuator = robot.actuator
     drive = [
         value
-        for viscous in actuator.viscous_friction_nm_s_rad
-        for value in (actuator.rotor_inertia_kg_m2, viscous, 0.0, 0.0)
+        for viscous, coulomb in zip(
+            actuator.viscous_friction_nm_s_rad, actuator.coulomb_friction_nm, strict=True
+        )
+        for value in (actuator.rotor_inertia_kg_m2, viscous, coulomb, 0.0)
     ]
     return np.array([body.mass for body in bodies] + sum(inertias, []) + rails + drive, dtype=float)
 
