@@ -7,6 +7,12 @@ which the platforms slide on their rails and C = Aᵀ diag(F) holds their Coulom
 (Moreau) time step, the unique minimiser of a convex function of the new joint rates, so a
 platform whose drive cannot overcome its friction stays at rest instead of chattering.
 
+The plant robot may carry what a planning model leaves out: the actuators' reflected rotor
+inertia (added to M's diagonal), viscous and Coulomb friction in the joints' gear trains
+(Coulomb as two more lines of the same implicit step), gear losses (the load gets η τ from
+a motor that drove it in the last step, τ / η from one it was driven back by) and encoder
+zero offsets (the encoders read θ + offset, and each position loop holds its reading).
+
 Each actuator runs the Dynamixel PRO's integrated position controller as the reference
 describes it (the paper's Fig. 18): a P position loop gives a rate command, limited by
 the Velocity Limit; a PI velocity loop turns it into a current command, limited by the
