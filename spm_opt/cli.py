@@ -91,6 +91,30 @@ def _parser() -> argparse.ArgumentParser:
         "reasons: a worker killed, a lost connection, a timeout)",
     )
 
+    identify = commands.add_parser(
+        "identify", help="identify the robot's parameters from execution logs (a robot TOML)"
+    )
+    identify.add_argument("logs", nargs="+", type=Path, help="execution log CSV files")
+    identify.add_argument(
+        "--problem", required=True, type=Path, help="problem TOML whose robot is the prior"
+    )
+    identify.add_argument(
+        "--out", required=True, type=Path, help="robot TOML to write (.md and .png beside it)"
+    )
+    identify.add_argument("--validate", type=Path, help="a log not used for the fit")
+    identify.add_argument(
+        "--cutoff-hz", type=float, default=2.0, help="the parallel low-pass filter (default 2)"
+    )
+    identify.add_argument(
+        "--decimation",
+        type=int,
+        default=None,
+        help="keep one sample in N (default: 5 a cutoff period)",
+    )
+    identify.add_argument(
+        "--min-speed", type=float, default=0.02, metavar="RAD_S", help="slower samples left out"
+    )
+
     evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
     evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
@@ -304,6 +328,45 @@ def _evaluate(args: argparse.Namespace) -> None:
     print(json.dumps(report.to_dict(), indent=2) if args.json else report.to_markdown(), end="")
 
 
+def _identify(args: argparse.Namespace) -> None:
+    from spm_opt.files import write_atomically
+    from spm_opt.identify import (
+        identify,
+        prediction_figure,
+        prediction_rms,
+        report_markdown,
+        robot_file_text,
+    )
+    from spm_opt.identify_samples import log_samples
+    from spm_opt.plots import to_png
+    from spm_opt.problem import load_problem
+
+    if args.out.suffix != ".toml":
+        raise InputError(f"--out {args.out}: expected a robot file name ending in .toml")
+    problem = load_problem(args.problem)
+    settings = (args.cutoff_hz, args.decimation, args.min_speed)
+    samples = log_samples(args.logs, *settings)
+    identification = identify(problem.robot, samples)
+    validation = samples if args.validate is None else log_samples([args.validate], *settings)
+    on = "the fitted logs" if args.validate is None else f"{args.validate.name} (not fitted)"
+    prior = prediction_rms(problem.robot, validation)
+    identified = prediction_rms(identification.robot, validation)
+    figure = prediction_figure(problem.robot, identification.robot, validation)
+    files = {
+        args.out: robot_file_text(identification, args.out.stem),
+        args.out.with_suffix(".md"): report_markdown(identification, prior, identified, on),
+        args.out.with_suffix(".png"): to_png(figure),
+    }
+    write_atomically(files)
+    for path in files:
+        print(path)
+    print(
+        f"torque prediction RMS on {on}: prior {prior[0]:.4f}, {prior[1]:.4f} N·m; "
+        f"identified {identified[0]:.4f}, {identified[1]:.4f} N·m",
+        file=sys.stderr,
+    )
+
+
 def _compare(args: argparse.Namespace) -> None:
     from spm_opt.comparison import progress_line, run_planners, write_comparison
     from spm_opt.problem import load_problem
@@ -326,6 +389,7 @@ _COMMANDS = {
     "plan": _plan,
     "compare": _compare,
     "evaluate": _evaluate,
+    "identify": _identify,
     "execute": _execute,
     "emulate": _emulate,
     "sweep": _sweep,

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 
 from spm_opt.errors import UnreachableError
 from spm_opt.fields import Table, apply_overrides, read_toml
@@ -291,3 +292,39 @@ def _actuator(table: Table) -> Actuator:
     )
     table.finish()
     return actuator
+
+
+def robot_toml(robot: Robot, name: str, description: str = "") -> str:
+    """``robot`` as the text of a robot file (what :func:`load_robot` reads back)."""
+    document: dict[str, Any] = {"name": name, "description": description}
+    for key in _BODIES:
+        body = getattr(robot, key)
+        table: dict[str, Any] = {}
+        if body.rail_radius is not None:
+            table["rail_radius_mm"] = body.rail_radius / MM
+        table["com_radius_mm"] = body.com_radius / MM
+        table["mass_kg"] = body.mass
+        table["inertia_kg_m2"] = body.inertia.tolist()
+        document[key] = table
+    document["payload"] = {
+        "mass_kg": robot.payload.mass,
+        "offset_mm": (robot.payload.offset / MM).tolist(),
+    }
+    document["friction"] = {"mu": robot.friction.mu, "smoothing_rad_s": robot.friction.smoothing}
+    document["joints"] = {
+        "theta1_range_deg": (robot.joint_range[0] / DEG).tolist(),
+        "theta2_range_deg": (robot.joint_range[1] / DEG).tolist(),
+        "min_singularity_margin": robot.min_singularity_margin,
+        "encoder_offset_deg": (robot.encoder_offset / DEG).tolist(),
+    }
+    actuator = robot.actuator
+    document["actuator"] = {
+        "model": actuator.model,
+        "current_a": list(actuator.current_map.currents_a),
+        "torque_nm": list(actuator.current_map.torques_nm),
+        "rotor_inertia_kg_m2": actuator.rotor_inertia_kg_m2,
+        "gear_efficiency": actuator.gear_efficiency,
+        "viscous_friction_nm_s_per_rad": list(actuator.viscous_friction_nm_s_rad),
+        "coulomb_friction_nm": list(actuator.coulomb_friction_nm),
+    }
+    return tomli_w.dumps(document)
