@@ -123,8 +123,8 @@ def identify(robot: Robot, samples: Samples) -> Identification:
     if len(target) < 10 * base.rank:
         raise InputError(
             f"logs: {len(target)} moving samples after filtering, at least "
-            f"{10 * base.rank} needed for {base.rank} base parameters; log a longer "
-            "excitation (spm-opt plan --planner excitation)"
+            f"{10 * base.rank} needed for {base.rank} base parameters; log a longer motion "
+            "that keeps both joints turning"
         )
     columns = base.columns(y)
     residual_std = _residual_std(columns, target)
@@ -134,8 +134,8 @@ def identify(robot: Robot, samples: Samples) -> Identification:
     if not condition < MAX_CONDITION:
         raise InputError(
             f"logs: the motion does not excite the robot's base parameters (condition "
-            f"number {condition:.3g}); log an excitation plan (spm-opt plan --planner "
-            "excitation)"
+            f"number {condition:.3g}); log a motion that swings both joints back and forth "
+            "at several speeds"
         )
     estimate, *_ = np.linalg.lstsq(weighted, rhs, rcond=None)
     dof = max(len(rhs) - base.rank, 1)
