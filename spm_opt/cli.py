@@ -352,9 +352,13 @@ def _identify(args: argparse.Namespace) -> None:
     prior = prediction_rms(problem.robot, validation)
     identified = prediction_rms(identification.robot, validation)
     figure = prediction_figure(problem.robot, identification.robot, validation)
+    actuator = problem.robot.actuator
+    unit = actuator.current_unit_a  # one Present Current unit, A
     files = {
         args.out: robot_file_text(identification, args.out.stem),
-        args.out.with_suffix(".md"): report_markdown(identification, prior, identified, on),
+        args.out.with_suffix(".md"): report_markdown(
+            identification, prior, identified, on, float(actuator.current_map.torque(unit))
+        ),
         args.out.with_suffix(".png"): to_png(figure),
     }
     write_atomically(files)

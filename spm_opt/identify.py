@@ -114,6 +114,18 @@ class Identification:
     standard: np.ndarray
     robot: Robot
 
+    def seconds_for_identification(self) -> np.ndarray:
+        """Per base parameter, the seconds of such a log its standard error would need to
+        fall to 10 % of it (standard errors fall as 1/√length while the residuals stay
+        uncorrelated); inf where the estimate is 0."""
+        relative = np.divide(
+            self.standard_error,
+            IDENTIFIED_RELATIVE_ERROR * np.abs(self.estimate),
+            out=np.full(self.estimate.shape, np.inf),
+            where=self.estimate != 0.0,
+        )
+        return self.duration_s * relative**2
+
 
 def identify(robot: Robot, samples: Samples) -> Identification:
     """Identify ``robot``'s parameters (the prior) from filtered log samples."""
@@ -284,9 +296,14 @@ def robot_file_text(identification: Identification, name: str) -> str:
 
 
 def report_markdown(
-    identification: Identification, prior_rms: np.ndarray, identified_rms: np.ndarray, on: str
+    identification: Identification,
+    prior_rms: np.ndarray,
+    identified_rms: np.ndarray,
+    on: str,
+    current_unit_nm: float,
 ) -> str:
-    """The identification's summary: the base parameters and the torque predictions."""
+    """The identification's summary: the base parameters, the log each would need, and the
+    torque predictions; ``current_unit_nm``: one Present Current unit at the output."""
     ident = identification
     rows = [
         [
@@ -295,28 +312,34 @@ def report_markdown(
             f"{value:.4g}",
             f"{error:.2g}",
             "yes" if ok else "no",
+            f"{seconds:.3g}" if np.isfinite(seconds) else "never",
             unit_,
         ]
-        for name, unit_, prior, value, error, ok in zip(
+        for name, unit_, prior, value, error, ok, seconds in zip(
             ident.names,
             ident.units,
             ident.prior,
             ident.estimate,
             ident.standard_error,
             ident.identified,
+            ident.seconds_for_identification(),
             strict=True,
         )
     ]
+    header = ["base parameter", "prior", "estimate", "std. error", "identified", "log for 10 %, s"]
     lines = [
         "# Identification",
         "",
         f"{ident.duration_s:.1f} s of log, {ident.samples} samples after filtering; condition "
         f"number {ident.condition_number:.3g}; residual standard deviations "
-        f"{ident.residual_std_nm[0]:.4f} and {ident.residual_std_nm[1]:.4f} N·m.",
+        f"{ident.residual_std_nm[0]:.4f} and {ident.residual_std_nm[1]:.4f} N·m, against one "
+        f"current unit of {current_unit_nm:.4f} N·m at the output.",
         "",
-        *markdown_table(
-            ["base parameter", "prior", "estimate", "std. error", "identified", "unit"], rows
-        ),
+        "A base parameter counts as identified when its standard error is at most 10 % of its "
+        "value. The log for 10 % extrapolates this motion's length by 1/√length; a parameter "
+        "whose torques stay far below the residuals needs a livelier motion, not a longer one.",
+        "",
+        *markdown_table([*header, "unit"], rows),
         "",
         f"Torque prediction on {on} (RMS of measured − predicted, filtered as for the fit):",
         "",

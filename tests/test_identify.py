@@ -70,12 +70,19 @@ def test_the_identified_robot_predicts_the_plant_at_least_twice_as_well(plant_lo
     assert np.all(identified <= 0.5 * prior)
     assert np.all(identified <= 2.0 * truth)  # near what the plant's own model predicts
     assert identification.condition_number < 1e3
+    seconds = identification.seconds_for_identification()
+    identified_ones = identification.identified
+    assert identified_ones.any()
+    assert np.all(seconds[identified_ones] <= identification.duration_s)
+    assert np.all(seconds[~identified_ones] > identification.duration_s)
     # the command line writes the same robot, its report and its figure
     out = tmp_path / "identified.toml"
     argv = ["identify", str(fit), "--problem", str(HARDWARE_PROBLEM), "--out", str(out)]
     status, _ = run_cli([*argv, "--validate", str(validate)])
     assert status == 0
-    assert out.with_suffix(".md").read_text().startswith("# Identification")
+    report = out.with_suffix(".md").read_text()
+    assert report.startswith("# Identification") and "log for 10 %, s" in report
+    assert "one current unit of 0.1187 N·m" in report
     assert out.with_suffix(".png").stat().st_size > 10_000
     written = load_robot(out)
     assert written.friction.mu == pytest.approx(identification.robot.friction.mu)
