@@ -114,6 +114,20 @@ class Identification:
     standard: np.ndarray
     robot: Robot
 
+    def base_rows(self) -> list[tuple[str, str, float, float, float, bool]]:
+        """Per base parameter: name, unit, prior, estimate, standard error, identified."""
+        return list(
+            zip(
+                self.names,
+                self.units,
+                self.prior,
+                self.estimate,
+                self.standard_error,
+                self.identified,
+                strict=True,
+            )
+        )
+
     def seconds_for_identification(self) -> np.ndarray:
         """Per base parameter, the seconds of such a log its standard error would need to
         fall to 10 % of it (standard errors fall as 1/√length while the residuals stay
@@ -255,11 +269,16 @@ def robot_with_parameters(robot: Robot, standard: np.ndarray) -> Robot:
     return dataclasses.replace(robot, **bodies, friction=friction, actuator=actuator)
 
 
+def filtered_prediction(robot: Robot, samples: Samples) -> np.ndarray:
+    """The model's actuator torques of ``robot`` at the samples' motion, through the
+    parallel filter (M, 2), N·m."""
+    return samples.parallel(dynamics.actuator_torque(robot, samples.q, samples.qd, samples.qdd))
+
+
 def prediction_rms(robot: Robot, samples: Samples) -> np.ndarray:
     """RMS of measured − predicted torque per joint (2,), N·m, both through the parallel
-    filter: the model's actuator torques of ``robot`` at the samples' motion."""
-    predicted = dynamics.actuator_torque(robot, samples.q, samples.qd, samples.qdd)
-    error = samples.parallel(samples.torque - predicted)
+    filter (:func:`filtered_prediction`)."""
+    error = samples.parallel(samples.torque) - filtered_prediction(robot, samples)
     return np.sqrt(np.mean(error**2, axis=0))
 
 
@@ -274,15 +293,7 @@ def robot_file_text(identification: Identification, name: str) -> str:
         "# Base parameters (weighted least squares): estimate +- standard error [prior];",
         "# identified when the error is at most 10 % of the value.",
     ]
-    for base_name, base_unit, prior, value, error, ok in zip(
-        ident.names,
-        ident.units,
-        ident.prior,
-        ident.estimate,
-        ident.standard_error,
-        ident.identified,
-        strict=True,
-    ):
+    for base_name, base_unit, prior, value, error, ok in ident.base_rows():
         status = "identified" if ok else "NOT identified"
         lines.append(
             f"#   {value: .5g} +- {error:.2g} {base_unit} [{prior:.5g}] {status}: {base_name}"
@@ -315,15 +326,8 @@ def report_markdown(
             f"{seconds:.3g}" if np.isfinite(seconds) else "never",
             unit_,
         ]
-        for name, unit_, prior, value, error, ok, seconds in zip(
-            ident.names,
-            ident.units,
-            ident.prior,
-            ident.estimate,
-            ident.standard_error,
-            ident.identified,
-            ident.seconds_for_identification(),
-            strict=True,
+        for (name, unit_, prior, value, error, ok), seconds in zip(
+            ident.base_rows(), ident.seconds_for_identification(), strict=True
         )
     ]
     header = ["base parameter", "prior", "estimate", "std. error", "identified", "log for 10 %, s"]
@@ -361,7 +365,7 @@ def prediction_figure(prior: Robot, identified: Robot, samples: Samples) -> Figu
     axes = figure.subplots(2, 1, sharex=True)
     measured = samples.parallel(samples.torque)
     predictions = {
-        name: samples.parallel(dynamics.actuator_torque(robot, samples.q, samples.qd, samples.qdd))
+        name: filtered_prediction(robot, samples)
         for name, robot in (("prior", prior), ("identified", identified))
     }
     for joint, axis in enumerate(axes):

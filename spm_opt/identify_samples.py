@@ -19,6 +19,7 @@ filtering the motion first would not carry through. One sample in ``decimation``
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,7 @@ class Samples:
     def parallel(self, values: np.ndarray) -> np.ndarray:
         """``values`` (N, ...) low-passed at ``cutoff_hz`` run by run, decimated, and kept
         where both joints move (their filtered rates at least ``min_speed_rad_s``)."""
-        return self._filtered(values)[self._moving()]
+        return self._filtered(values)[self._moving]
 
     def _filtered(self, values: np.ndarray) -> np.ndarray:
         parts = []
@@ -97,12 +98,13 @@ class Samples:
             parts.append(scipy.signal.filtfilt(b, a, values[run], axis=0)[:: self.decimation])
         return np.concatenate(parts)
 
+    @cached_property
     def _moving(self) -> np.ndarray:
         return np.all(np.abs(self._filtered(self.qd)) >= self.min_speed_rad_s, axis=1)
 
     def __len__(self) -> int:
         """Samples the parallel filter keeps."""
-        return int(np.sum(self._moving()))
+        return int(np.sum(self._moving))
 
 
 def log_samples(

@@ -584,12 +584,6 @@ def _bounds(
     }
 
 
-def _waiting(group: RowGroup, demanded: frozenset[str]) -> bool:
-    """Whether a group's rows are on demand and not yet demanded (not in the NLP)."""
-    constraint = group.constraint
-    return group.place in constraint.on_demand and constraint.name not in demanded
-
-
 def _place_offset(group: RowGroup, fractions: np.ndarray, interval: int) -> float:
     """Where in its interval a group's point sits, as a fraction of the interval."""
     if group.place == INSIDE:
@@ -700,7 +694,7 @@ def _moved_check_points(
     worst = np.full((grid.intervals, PROBE_POINTS), -np.inf)
     found = set()
     for group in groups:
-        if group.place != INSIDE or _waiting(group, demanded):
+        if group.place != INSIDE or group.constraint.waiting(group.place, demanded):
             continue
         low, high = (np.asarray(v, dtype=float) for v in group.constraint.limits(bounds))
         values = rows[:, group.start : group.start + group.size]

@@ -142,6 +142,10 @@ class Constraint:
     on_demand: tuple[str, ...] = ()
     dynamics: bool = False
 
+    def waiting(self, place: str, demanded: frozenset[str]) -> bool:
+        """Whether its rows at ``place`` are on demand and not (yet) ``demanded``."""
+        return place in self.on_demand and self.name not in demanded
+
 
 def _tool_speed_mm(bounds: PlannerBounds) -> float:
     return (bounds.tool_speed or UNLIMITED) / MM
@@ -335,7 +339,7 @@ def row_groups(
     groups, start = [], 0
     for constraint in constraints(with_dynamics):
         for place in constraint.places:
-            if place in constraint.on_demand and constraint.name not in demanded:
+            if constraint.waiting(place, demanded):
                 continue
             for point in range(_points(place, checks)):
                 groups.append(RowGroup(constraint, place, point, start, constraint.size))
