@@ -233,7 +233,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
-    chosen = names_option(parser, args.planners) or list(so.PLANNERS)
+    chosen = names_option(parser, args.planners) or so.planners.contour_planners()
     skipped = names_option(parser, args.skip)
     if REFERENCE in skipped:
         parser.error(f"{REFERENCE} is the reference of the ratios; it always runs")

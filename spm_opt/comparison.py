@@ -20,7 +20,7 @@ from spm_opt import limits
 from spm_opt.evaluate import Report, evaluate
 from spm_opt.files import write_atomically
 from spm_opt.model.params import MM
-from spm_opt.planners import PLANNERS, get_planner, plan
+from spm_opt.planners import contour_planners, get_planner, plan
 from spm_opt.problem import Problem
 from spm_opt.report.columns import COLUMN, COLUMNS
 from spm_opt.report.markdown import markdown_table
@@ -115,9 +115,9 @@ def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = Non
 def run_planners(
     problem: Problem, planners: Sequence[str] | None = None, progress: Progress | None = None
 ) -> list[Outcome]:
-    """Plan ``problem`` with each planner (default: every registered one, by name) and
-    evaluate every plan. Unknown names are refused before anything runs."""
-    names = sorted(PLANNERS) if planners is None else list(planners)
+    """Plan ``problem`` with each planner (default: every registered planner that plans the
+    cut, by name) and evaluate every plan. Unknown names are refused before anything runs."""
+    names = contour_planners() if planners is None else list(planners)
     for name in names:
         get_planner(name)
     outcomes = []

@@ -5,7 +5,9 @@ how much the evaluator allows beyond it is :mod:`spm_opt.limits`' table: 0.5 % o
 rate-type limit, nothing beyond the joint range and the singularity margin. Besides the
 limits, a clean plan cuts the contour: it visits every landmark in order within the path
 tolerance (the contour tolerance), sweeps the whole contour inside the tube with no
-stretch left out, and never backtracks along it by more than the path tolerance.
+stretch left out, and never backtracks along it by more than the path tolerance. A plan
+whose metadata say ``ignores_contour`` (an excitation plan for identification) is judged
+by the robot's limits alone: its cut figures are measured, not judged.
 
 A trajectory measured once is not measured again for the same problem object, rate and
 landmark times while it lives: a planner that checks its own plan (the optimal-control
@@ -25,7 +27,7 @@ import numpy as np
 
 from spm_opt.bounds import duration_lower_bound
 from spm_opt.contour import direction_rates
-from spm_opt.limits import RULES, path_tolerance
+from spm_opt.limits import ROBOT, RULES, path_tolerance
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
@@ -99,6 +101,7 @@ class Report:
     energy_j: float
     effort_n2m2s: float
     violations: list[Violation] = field(default_factory=list)
+    contour_judged: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON; violations as dicts."""
@@ -110,7 +113,7 @@ class Report:
         """The report as a two-column markdown table, then the violations."""
         rows = [("planner", self.planner or "(unknown)")]
         for key, value in self.to_dict().items():
-            if key in ("planner", "violations", "landmark_errors_mm"):
+            if key in ("planner", "violations", "landmark_errors_mm", "contour_judged"):
                 continue
             rows.append((key, _format(value)))
         for visit in self.landmark_errors_mm:
@@ -121,6 +124,8 @@ class Report:
                 )
             )
         lines = [*markdown_table(("figure", "value"), rows), ""]
+        if not self.contour_judged:
+            lines.append("The plan ignores the contour: only the robot's limits are judged.")
         if self.violations:
             lines.append(f"**{len(self.violations)} violation(s):**")
             lines += [f"- {v}" for v in self.violations]
@@ -254,6 +259,8 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
     checks.upper("coverage", "coverage", np.array([gap / MM]), path / MM, np.array([gap_time]))
     checks.upper("backtracking", "backtracking", backtrack / MM, path / MM)
     checks.lower("singularity margin", "singularity margin", margins, robot.min_singularity_margin)
+    contour_judged = not trajectory.metadata.get("ignores_contour", False)
+    violations = [v for v in checks.found if contour_judged or RULES[v.rule].judges == ROBOT]
 
     return Report(
         planner=trajectory.metadata.get("planner"),
@@ -283,7 +290,8 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
         current_margin=(1.0 - peak_current / robot.actuator.continuous_current_a).tolist(),
         energy_j=float(np.trapezoid(np.sum(np.abs(torque * qd), axis=1), t)),
         effort_n2m2s=float(_time_mean(np.sum(torque**2, axis=1), t) * duration),
-        violations=checks.found,
+        violations=violations,
+        contour_judged=contour_judged,
     )
 
 

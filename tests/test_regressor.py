@@ -56,7 +56,7 @@ def test_y_pi_is_the_models_torque(robot, states):
 
 
 def test_the_columns_hold_none_of_the_parameters():
-    function = regressor._link_function()
+    function = regressor.link_function()
     names = dynamics.PARAMETER_NAMES
     parameters = ca.SX.sym("p", len(names))
     columns, _ = function(ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("qdd", 2), parameters)

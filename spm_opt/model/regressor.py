@@ -95,7 +95,7 @@ def standard_parameters(robot: Robot) -> np.ndarray:
 
 
 @cache
-def _link_function() -> ca.Function:
+def link_function() -> ca.Function:
     """(q, q̇, q̈, the model's parameter vector) -> vec(Y) of the bodies' and rails'
     columns (2 × 30, column-major) and τ_payload (2); only the vector's fixed entries
     (lengths, payload, gravity) matter."""
@@ -134,7 +134,7 @@ def _link_function() -> ca.Function:
 
 @cache
 def _batch() -> BatchFunction | None:
-    return compile_batch(_link_function())
+    return compile_batch(link_function())
 
 
 def regressor(
@@ -149,7 +149,7 @@ def regressor(
     if batch is None:
         columns, payload = (
             value.full().T
-            for value in _link_function()(*(a.T for a in arrays), np.asarray(fixed)[:, None])
+            for value in link_function()(*(a.T for a in arrays), np.asarray(fixed)[:, None])
         )
     else:
         columns, payload = batch(*arrays, fixed, shared=(3,))

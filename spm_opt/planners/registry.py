@@ -14,7 +14,10 @@ from spm_opt.trajectory import Trajectory, package_version
 
 
 class Planner(Protocol):
-    """Turns a :class:`Problem` into a :class:`Trajectory`; never reports metrics."""
+    """Turns a :class:`Problem` into a :class:`Trajectory`; never reports metrics.
+
+    A planner whose plans do not cut the problem's contour (an excitation for
+    identification) says so with a class attribute ``cuts_contour = False``."""
 
     name: str
 
@@ -43,6 +46,11 @@ def get_planner(name: str) -> Planner:
         raise UnknownPlannerError(
             f"planner = {name!r}: unknown; expected one of {', '.join(sorted(PLANNERS))}"
         ) from None
+
+
+def contour_planners() -> list[str]:
+    """The names of the registered planners that plan the problem's cut, sorted."""
+    return sorted(name for name, p in PLANNERS.items() if getattr(p, "cuts_contour", True))
 
 
 def planner_options(problem: Problem, name: str, allowed: tuple[str, ...] = ()) -> dict:
