@@ -109,7 +109,7 @@ class TrueState:
 class StateTrace:
     """The plant's true state, sampled over a run: appended in memory, saved as ``.npz``."""
 
-    FIELDS = ("time_s", "position_rad", "velocity_rad_s", "goal_rad")
+    FIELDS = ("time_s", "position_rad", "velocity_rad_s", "goal_rad", "current_a")
 
     def __init__(self) -> None:
         self._rows: list[tuple[float, ...]] = []
@@ -120,16 +120,21 @@ class StateTrace:
     def record(self, time_s: float, plant: DynamixelPlant) -> None:
         """Append the plant's present state, sampled at ``time_s`` (s)."""
         q, v, goal = plant.position_rad, plant.velocity_rad_s, plant.goal_position_rad
-        self._rows.append((time_s, q[0], q[1], v[0], v[1], goal[0], goal[1]))
+        current = plant.current_a
+        self._rows.append(
+            (time_s, q[0], q[1], v[0], v[1], goal[0], goal[1], current[0], current[1])
+        )
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """``time_s`` (n,) and ``position_rad``, ``velocity_rad_s``, ``goal_rad`` (n, 2)."""
-        table = np.array(self._rows, dtype=float).reshape(-1, 7)
+        """``time_s`` (n,) and ``position_rad``, ``velocity_rad_s``, ``goal_rad`` and
+        ``current_a`` (the motor currents, before the sensor's noise and rounding) (n, 2)."""
+        table = np.array(self._rows, dtype=float).reshape(-1, 9)
         return {
             "time_s": table[:, 0],
             "position_rad": table[:, 1:3],
             "velocity_rad_s": table[:, 3:5],
             "goal_rad": table[:, 5:7],
+            "current_a": table[:, 7:9],
         }
 
     def save(self, path: str | Path) -> None:
