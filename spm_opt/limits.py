@@ -31,9 +31,10 @@ What planners impose (:func:`planner_bounds`): each rate-type limit less the pla
 ``margin`` (a fraction kept for the motion between the points where it is imposed). The
 torque limit is translated once for all of them: the evaluator judges the torque the
 actuator delivers, ``actuator.drive_torque`` of the model's load torque, which adds the
-reflected rotor inertia J q̈ and costs 1/η while driving; and the motor current the
-actuator's current map gives for it, within the continuous current. A planner therefore
-bounds the load side |τ_load + J q̈| by η × min(torque limit, torque at the continuous
+reflected rotor inertia J q̈ and the joint's friction f_v q̇ + f_c sign(q̇) and costs 1/η
+while driving; and the motor current the actuator's current map gives for it, within the
+continuous current. A planner therefore bounds the joint side
+|τ_load + J q̈ + f_v q̇ + f_c sign(q̇)| by η × min(torque limit, torque at the continuous
 current): sufficient for both, and exact while the actuator drives the load.
 """
 
@@ -134,10 +135,9 @@ class PlannerBounds:
     tool_speed : float or None, m/s
     contour_tolerance : float or None, m
     load_torque : float, N·m
-        Bound on |τ_load + J q̈| per joint, τ_load the model's inverse dynamics with
+        Bound on the joint side |τ_load + J q̈ + f_v q̇ + f_c sign(q̇)| per joint, τ_load
+        the model's inverse dynamics with
         friction (see the module docstring).
-    rotor_inertia : float, kg·m²
-        The actuator's reflected rotor inertia J.
     joint_range : ndarray, shape (2, 2), rad
         [[low1, high1], [low2, high2]], hard: no margin.
     min_singularity_margin : float
@@ -150,7 +150,6 @@ class PlannerBounds:
     tool_speed: float | None
     contour_tolerance: float | None
     load_torque: float
-    rotor_inertia: float
     joint_range: np.ndarray
     min_singularity_margin: float
 
@@ -180,7 +179,6 @@ def planner_bounds(problem: Problem, margin: float) -> PlannerBounds:
         tool_speed=kept(limits.max_tool_speed),
         contour_tolerance=kept(limits.contour_tolerance),
         load_torque=actuator.gear_efficiency * torque_limit(problem) * keep,
-        rotor_inertia=actuator.rotor_inertia_kg_m2,
         joint_range=np.asarray(robot.joint_range, dtype=float),
         min_singularity_margin=robot.min_singularity_margin,
     )

@@ -21,9 +21,9 @@ points (D-optimal design), its columns scaled once by their norms at the start. 
 symbolic model as every planner's, solved by IPOPT (limited-memory Hessian; its
 20 coefficients are few): the joint range (hard, :data:`RANGE_CLEARANCE_RAD` inside it),
 the singularity margin, the joint speed, acceleration and jerk less ``margin`` and the
-actuator torque (the optimisers' torque table, :mod:`spm_opt.model.torque_table`) imposed at
-the grid points. The Coulomb column is smoothed by tanh(q̇/:data:`COULOMB_SMOOTHING_RAD_S`)
-for the design only.
+actuator torque (the optimal-control planners' joint side torque,
+:func:`spm_opt.planners.ocp.load_torque`) imposed at the grid points. The Coulomb column
+is smoothed by tanh(q̇/:data:`COULOMB_SMOOTHING_RAD_S`) for the design only.
 
 The plan ignores the contour: its metadata say so (``ignores_contour``) and the evaluator
 judges it by the robot's limits alone. It is a :class:`Trajectory` like every plan, sampled
@@ -43,9 +43,10 @@ import numpy as np
 from spm_opt.errors import PlanningError
 from spm_opt.evaluate import evaluate
 from spm_opt.limits import ROBOT, RULES, planner_bounds
-from spm_opt.model import dynamics, kinematics, torque_table
+from spm_opt.model import dynamics, kinematics
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
 from spm_opt.model.regressor import DRIVE_PARAMETERS, STANDARD_PARAMETERS, link_function
+from spm_opt.planners.ocp import dynamics_parameters, load_torque
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
@@ -253,6 +254,12 @@ class _Design:
         limits = self.problem.limits
         low, high = self.problem.robot.joint_range[:, 0], self.problem.robot.joint_range[:, 1]
         room = np.minimum(self.centre - low, high - self.centre) - RANGE_CLEARANCE_RAD
+        if np.any(room <= 0.0):
+            raise PlanningError(
+                "excitation: the first landmark lies within "
+                f"{np.degrees(RANGE_CLEARANCE_RAD):g} deg of the joint range; there is no "
+                "room to swing about it"
+            )
         x = []
         for joint in range(2):
             coefficients = projector @ rng.normal(size=self.size)
@@ -291,13 +298,9 @@ class _Design:
         information = ca.mtimes(weighted.T, weighted) / rows.shape[0]
         objective = -_log_det(base.rank)(information)
 
-        table = torque_table.torque_function(robot.joint_range)
-        torque = (
-            table.map("torques", "serial", points, [3], [])(
-                q.T, qd.T, qdd.T, torque_table.table_values(robot)
-            )
-            + bounds.rotor_inertia * qdd.T
-        )
+        values = dynamics_parameters(robot)
+        joint_torque = _joint_torque(_range_key(robot.joint_range), len(values))
+        torque = joint_torque.map("torques", "serial", points, [3], [])(q.T, qd.T, qdd.T, values)
         singular = _singularity_rows(bounds.min_singularity_margin + SINGULARITY_CLEARANCE)
         margin = singular.map(points, "serial")(q.T)
         rest = np.kron(np.eye(2), rest_constraints(settings.harmonics))
@@ -366,6 +369,16 @@ class _Design:
         values = rows(x).full()
         norms = np.sqrt(np.mean(values**2, axis=0))
         return np.where(norms > 0.0, norms, 1.0)
+
+
+@cache
+def _joint_torque(joint_range: bytes, size: int) -> ca.Function:
+    """The optimal-control planners' joint side torque (:func:`load_torque`) as a Function
+    of (q, q̇, q̈, :func:`dynamics_parameters` (``size``))."""
+    q, qd, qdd = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("qdd", 2)
+    parameters = ca.SX.sym("parameters", size)
+    torque = load_torque(joint_range)(q, qd, qdd, parameters)
+    return ca.Function("joint_torque", [q, qd, qdd, parameters], [torque])
 
 
 def _range_key(joint_range: np.ndarray) -> bytes:

@@ -83,7 +83,7 @@ from spm_opt.errors import PlanningError
 from spm_opt.evaluate import Violation, evaluate
 from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds, planner_bounds
 from spm_opt.model import dynamics, torque_table
-from spm_opt.model.params import MM
+from spm_opt.model.params import MM, Robot
 from spm_opt.planners.contour_guess import segment_motion
 from spm_opt.planners.nlp_library import Solver, nlp_solver
 from spm_opt.planners.ocp_assembly import (
@@ -219,15 +219,39 @@ def _grid(segments: int, settings: OcpSettings) -> Grid:
     return Grid(segments, (corner, settings.nodes_per_phase, corner))
 
 
-def _load_torque(joint_range: bytes) -> Callable[..., ca.SX]:
-    """(q, q̇, q̈, parameters) -> load torque with the rotor's J q̈, N·m, for robots of a
-    joint range (its bytes); ``parameters``: the table's values of the robot, then J."""
+DRIVE_TERMS = 5
+"""The drives' entries after the torque table's values in the NLP's robot: the rotor's J,
+then each joint's viscous and each joint's Coulomb friction."""
+
+
+def load_torque(joint_range: bytes) -> Callable[..., ca.SX]:
+    """(q, q̇, q̈, parameters) -> the joint side of the actuators' torque, N·m, for robots
+    of a joint range (its bytes): the load torque (smooth friction) plus the drives' J q̈,
+    f_v q̇ and f_c σ(q̇), σ(v) = v / sqrt(v² + s²) with the friction's smoothing s (the
+    table's last value); ``parameters``: :func:`dynamics_parameters`."""
     table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
 
     def torque(q: ca.SX, qd: ca.SX, qdd: ca.SX, parameters: ca.SX) -> ca.SX:
-        return table(q, qd, qdd, parameters[:-1]) + parameters[-1] * qdd
+        values = parameters[:-DRIVE_TERMS]
+        rotor, viscous, coulomb = parameters[-5], parameters[-4:-2], parameters[-2:]
+        smoothing = values[-1]
+        sliding = qd / ca.sqrt(qd**2 + smoothing**2)
+        return table(q, qd, qdd, values) + rotor * qdd + viscous * qd + coulomb * sliding
 
     return torque
+
+
+def joint_side_torque(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """:func:`load_torque` in numpy over samples (N, 2), N·m, from the Lagrange model
+    (not the table)."""
+    actuator, smoothing = robot.actuator, robot.friction.smoothing
+    load = dynamics.inverse_dynamics(robot, q, qd, qdd, exact=False)
+    return (
+        load
+        + actuator.rotor_inertia_kg_m2 * qdd
+        + np.asarray(actuator.viscous_friction_nm_s_rad) * qd
+        + np.asarray(actuator.coulomb_friction_nm) * qd / np.sqrt(qd**2 + smoothing**2)
+    )
 
 
 def _range_key(problem: Problem) -> bytes:
@@ -235,14 +259,16 @@ def _range_key(problem: Problem) -> bytes:
     return np.ascontiguousarray(problem.robot.joint_range, dtype=float).tobytes()
 
 
-def _dynamics_parameters(problem: Problem, with_torque: bool) -> np.ndarray:
-    """The robot as the NLP takes it: its torque table's values, then the rotor's J; none
-    without the torque rows (an unused input of the mapped interval function swells the
-    generated C of its derivatives: 31 against 7 MB for minimum time)."""
-    if not with_torque:
-        return np.zeros(0)
-    rotor = problem.robot.actuator.rotor_inertia_kg_m2
-    return np.concatenate([torque_table.table_values(problem.robot), [rotor]])
+def dynamics_parameters(robot: Robot) -> np.ndarray:
+    """The robot as the NLP takes it: its torque table's values, then the drives' J, f_v
+    (per joint) and f_c (per joint)."""
+    actuator = robot.actuator
+    drives = [
+        actuator.rotor_inertia_kg_m2,
+        *actuator.viscous_friction_nm_s_rad,
+        *actuator.coulomb_friction_nm,
+    ]
+    return np.concatenate([torque_table.table_values(robot), drives])
 
 
 @dataclass(frozen=True)
@@ -274,8 +300,8 @@ def _interval(
     if not with_torque:
         return interval_function(checks, False, None, 0, demanded)
     table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
-    n_dynamics = table.size1_in(3) + 1  # the table's values, J
-    return interval_function(checks, True, _load_torque(joint_range), n_dynamics, demanded)
+    n_dynamics = table.size1_in(3) + DRIVE_TERMS
+    return interval_function(checks, True, load_torque(joint_range), n_dynamics, demanded)
 
 
 @cache
@@ -416,7 +442,9 @@ def _parameters(
         [
             _arcs(problem).ravel(),
             fractions.ravel(order="F"),
-            _dynamics_parameters(problem, with_torque),
+            # none without the torque rows: an unused input of the mapped interval function
+            # swells the generated C of its derivatives (31 against 7 MB for minimum time)
+            dynamics_parameters(problem.robot) if with_torque else np.zeros(0),
             weights,
             scales,
         ]
@@ -979,14 +1007,14 @@ def _continuation(solution: dict[str, ca.DM]) -> dict[str, np.ndarray]:
 
 
 def _torque_exceeded(problem: Problem, grid: Grid, bounds: PlannerBounds, x: np.ndarray) -> bool:
-    """Whether the load torques (smooth friction, rotor inertia) at the Gauss points of x's
+    """Whether the joint side torques (:func:`joint_side_torque`) at the Gauss points of x's
     intervals (where the NLP would impose them) exceed ``bounds``' torque bound."""
     motion = grid.trajectory(x, {})
     nodes = grid.node_times(grid.split(x)[2])
     t = np.concatenate([nodes[:-1] + f * np.diff(nodes) for f in GAUSS_FRACTIONS])
     q, qd, qdd = motion.position(t), motion.velocity(t), motion.acceleration(t)
-    torque = dynamics.inverse_dynamics(problem.robot, q, qd, qdd, exact=False)
-    return bool(np.max(np.abs(torque + bounds.rotor_inertia * qdd)) > bounds.load_torque)
+    torque = joint_side_torque(problem.robot, q, qd, qdd)
+    return bool(np.max(np.abs(torque)) > bounds.load_torque)
 
 
 REFINEMENTS = 5

@@ -56,8 +56,8 @@ class Point:
     (SX expressions, built once when first asked for).
 
     ``arc`` holds the segment's great circle (:data:`ARC_PARAMETERS`, lengths in mm, so
-    that the squared path rows are near 1); ``torque`` maps (q, q̇, q̈) to the load torque
-    with the rotor's J q̈, N·m.
+    that the squared path rows are near 1); ``torque`` maps (q, q̇, q̈) to the joint side
+    of the actuators' torque (the load's, the drives' inertia and friction), N·m.
     """
 
     def __init__(self, state: ca.SX, arc: ca.SX, torque: Callable[..., ca.SX]) -> None:
@@ -89,7 +89,7 @@ class Point:
 
     @cached_property
     def torque(self) -> ca.SX:
-        """Load torque with the rotor's J q̈, N·m (2,)."""
+        """The joint side of the actuators' torque, N·m (2,)."""
         return self._torque(self.q, self.qd, self.qdd)
 
 
