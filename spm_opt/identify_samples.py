@@ -42,7 +42,8 @@ STATE_CUTOFF_HZ = 10.0
 """Cutoff of the filter on the measured motion (at most 0.4 of the log's rate)."""
 SAMPLES_PER_CUTOFF = 5
 """Samples kept a period of the parallel filter's cutoff by default (2.5 times its Nyquist
-rate: the residuals come out nearly uncorrelated, so the standard errors are honest)."""
+rate). Neighbouring rows' residuals stay correlated (a lag-1 autocorrelation of 0.65 to
+0.75 measured on the simulated robot); identification's standard errors allow for it."""
 MIN_RUN_SAMPLES = 50
 """Shortest run kept (filtfilt pads 15 samples at each end at order 4)."""
 
@@ -85,6 +86,12 @@ class Samples:
                 for r, rate in zip(self.runs, self.rates_hz, strict=True)
             )
         )
+
+    @property
+    def rows_per_period(self) -> int:
+        """Rows :meth:`parallel` keeps per period of its cutoff (of the fastest run): the
+        span over which its rows' noise is correlated."""
+        return max(1, round(max(self.rates_hz) / (self.decimation * self.cutoff_hz)))
 
     def parallel(self, values: np.ndarray) -> np.ndarray:
         """``values`` (N, ...) low-passed at ``cutoff_hz`` run by run, decimated, and kept
