@@ -105,6 +105,7 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
         ["calibrate_prototype.py"],
         ["hardware_verification.py"],
         pytest.param(["hardware_verification.py", "--backend", "emulator"], marks=pytest.mark.slow),
+        pytest.param(["identify_prototype.py", "--fit-seconds", "40"], marks=pytest.mark.slow),
     ],
     ids=lambda c: " ".join(c),
 )
@@ -115,6 +116,7 @@ def test_every_experiment_script_runs(tmp_path, command):
         "reproduce_paper.py",
         "calibrate_prototype.py",
         "hardware_verification.py",
+        "identify_prototype.py",
     }
     assert {p.name for p in (ROOT / "experiments").glob("*.py")} == listed
     out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
@@ -125,6 +127,10 @@ def test_every_experiment_script_runs(tmp_path, command):
         table = (tmp_path / "all_problems.csv").read_text().splitlines()
         problems = len(list((ROOT / "problems").glob("*.toml")))
         assert len(table) == 1 + 2 * problems
+    if command[0] == "identify_prototype.py":
+        study = (tmp_path / "identification_study.md").read_text()
+        assert "| gear efficiency η |" in study and "∫τᵀτ dt on the plant" in study
+        assert (tmp_path / "identified.toml").is_file() and (tmp_path / "identified.png").is_file()
     if command[0] == "hardware_verification.py":
         summary = json.loads((tmp_path / "hardware_verification.json").read_text())
         assert summary["run"]["completed"]
