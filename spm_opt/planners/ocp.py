@@ -232,8 +232,8 @@ def load_torque(joint_range: bytes) -> Callable[..., ca.SX]:
     table = torque_table.torque_function(np.frombuffer(joint_range).reshape(2, 2))
 
     def torque(q: ca.SX, qd: ca.SX, qdd: ca.SX, parameters: ca.SX) -> ca.SX:
-        values = parameters[:-DRIVE_TERMS]
-        rotor, viscous, coulomb = parameters[-5], parameters[-4:-2], parameters[-2:]
+        values, drives = parameters[:-DRIVE_TERMS], parameters[-DRIVE_TERMS:]
+        rotor, viscous, coulomb = drives[0], drives[1:3], drives[3:5]
         smoothing = values[-1]
         sliding = qd / ca.sqrt(qd**2 + smoothing**2)
         return table(q, qd, qdd, values) + rotor * qdd + viscous * qd + coulomb * sliding
