@@ -163,6 +163,8 @@ class Identification:
         Samples used (after filtering, decimation and leaving out the slow ones).
     duration_s : float
         Seconds of log.
+    unseen : list of str
+        The standard parameters no motion shows (their regressor columns are zero).
     standard : ndarray, shape (38,)
         The robot file's standard parameters (:data:`STANDARD_PARAMETERS`).
     robot : Robot
@@ -184,6 +186,7 @@ class Identification:
     residual_std_nm: np.ndarray
     samples: int
     duration_s: float
+    unseen: list[str]
     standard: np.ndarray
     robot: Robot
 
@@ -435,6 +438,7 @@ def identify(robot: Robot, samples: Samples) -> Identification:
         residual_std_nm=residual_std,
         samples=len(target),
         duration_s=samples.duration_s,
+        unseen=[STANDARD_PARAMETERS[k] for k in base.unseen],
         standard=standard,
         robot=robot_with_parameters(robot, standard, used),
     )
@@ -689,6 +693,10 @@ def report_markdown(
         "needs a livelier motion, not a longer one.",
         "",
         f"Gear efficiency: {_efficiency_sentence(ident)}",
+        "",
+        f"Not identifiable from any motion: {', '.join(ident.unseen) or 'none'} (they leave "
+        "no trace in the torques). Every other parameter of the robot file shows only in the "
+        "combinations below; the prior settles how a combination splits.",
         "",
         *markdown_table([*header, "unit"], rows),
         "",

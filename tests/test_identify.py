@@ -178,6 +178,8 @@ def test_the_identified_robot_predicts_the_plant_at_least_twice_as_well(plant_lo
     assert "one current unit of 0.1187 N·m" in report
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert "gear_efficiency (identified on the loss 1 − η)" in report
+    # the arcs' inertias about axes they never turn about are named as never identifiable
+    assert "Not identifiable from any motion: upper_arc.inertia.yy, upper_arc.inertia.zz" in report
     written = load_robot(out)
     assert written.actuator.gear_efficiency == pytest.approx(identification.efficiency)
     assert written.friction.mu == pytest.approx(identification.robot.friction.mu)
