@@ -4,11 +4,15 @@ errors for limits no plan can meet."""
 import dataclasses
 from pathlib import Path
 
+import casadi as ca
+import numpy as np
 import pytest
 
 import spm_opt as so
+from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners import get_planner
+from spm_opt.planners.ocp import dynamics_parameters, load_torque
 from spm_opt.sweep.spec import load_sweep_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
@@ -289,3 +293,32 @@ def test_flaps_that_once_failed_are_clean(sweep, planner, flap):
     report = so.evaluate(problem, so.plan(problem, planner))
     assert report.violations == []
     assert report.max_backtrack_mm <= 1e-6
+
+
+def test_the_nlp_torque_is_the_actuators_joint_side_torque_with_drive_friction():
+    """The NLP's torque (the table, the rotor's J q̈ and the drives' friction, smoothed)
+    against the Lagrange model through ``Actuator.drive_torque`` (exact sign, η = 1) at
+    states away from rest, where the smoothing is negligible."""
+    robot = so.load_robot(PROBLEMS / "robots" / "prototype.toml")
+    actuator = dataclasses.replace(
+        robot.actuator,
+        rotor_inertia_kg_m2=2.5e-3,
+        viscous_friction_nm_s_rad=(0.3, 0.2),
+        coulomb_friction_nm=(0.02, 0.05),
+    )
+    robot = dataclasses.replace(robot, actuator=actuator)
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-0.8, 0.8, (50, 2))
+    qd = rng.choice([-1.0, 1.0], (50, 2)) * rng.uniform(0.2, 1.0, (50, 2))
+    qdd = rng.normal(0.0, 2.0, (50, 2))
+    symbols = [ca.SX.sym(name, 2) for name in ("q", "qd", "qdd")]
+    values = dynamics_parameters(robot)
+    parameters = ca.SX.sym("p", len(values))
+    key = np.ascontiguousarray(robot.joint_range, dtype=float).tobytes()
+    function = ca.Function("t", [*symbols, parameters], [load_torque(key)(*symbols, parameters)])
+    nlp = function.map(len(q))(q.T, qd.T, qdd.T, values).full().T
+    load = dynamics.inverse_dynamics(robot, q, qd, qdd)
+    reference = actuator.drive_torque(load, qd, qdd)
+    assert np.max(np.abs(nlp - reference)) < 1e-4
+    # and the drives' friction is really in it: 0.06 to 0.35 N·m here
+    assert np.min(np.abs(reference - load - actuator.rotor_inertia_kg_m2 * qdd)) > 0.05
