@@ -242,6 +242,17 @@ def _log(path: Path, rows: int, moving: bool = True) -> Path:
             id="missing-column",
         ),
         pytest.param(
+            lambda d: (
+                pd.DataFrame({"planner": ["cubic"], "duration_s": [40.0]}).to_csv(
+                    d / "comparison.csv", index=False
+                )
+                or d / "comparison.csv"
+            ),
+            (),
+            ("15 of the execution log's 15 columns are missing", "log of spm-opt execute?"),
+            id="not-a-log",
+        ),
+        pytest.param(
             lambda d: _log(d / "ok.csv", 3000),
             ("--cutoff-hz", "80"),
             ("--cutoff-hz 80",),

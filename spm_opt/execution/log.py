@@ -113,6 +113,10 @@ class LogWriter:
         )
 
 
+MISSING_NAMED = 3
+"""Missing columns a log's error names before it says the file is no execution log."""
+
+
 def read_log(path: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
     """A CSV log as a DataFrame (one row per sample, SI) and its header."""
     path = Path(path)
@@ -120,6 +124,12 @@ def read_log(path: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
         raise InputError(f"log {path}: no such file")
     table = pd.read_csv(path)
     missing = [c for c in COLUMNS if c not in table.columns]
+    if len(missing) > MISSING_NAMED:
+        raise InputError(
+            f"log {path}: {len(missing)} of the execution log's {len(COLUMNS)} columns are "
+            f"missing ({', '.join(missing[:MISSING_NAMED])}, ...); is it a log of "
+            "spm-opt execute?"
+        )
     if missing:
         raise InputError(f"log {path}: missing columns {', '.join(missing)}")
     sidecar = header_path(path)
