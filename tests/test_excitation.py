@@ -14,7 +14,12 @@ from spm_opt.limits import CUT, ROBOT, RULES
 from spm_opt.model.base_parameters import base_parameters
 from spm_opt.model.regressor import regressor
 from spm_opt.planners import contour_planners, plan
-from spm_opt.planners.excitation import FourierBasis, fourier_motion, rest_constraints
+from spm_opt.planners.excitation import (
+    FourierBasis,
+    designed,
+    fourier_motion,
+    rest_constraints,
+)
 from spm_opt.problem import load_problem
 from spm_opt.trajectory import Trajectory
 
@@ -121,3 +126,16 @@ def test_bad_settings_are_one_line_errors(options, expected):
     with pytest.raises(InputError) as error:
         plan(_problem(**options), "excitation")
     assert expected in str(error.value) and "\n" not in str(error.value)
+
+
+def test_the_design_counts_what_a_motion_can_bring_out(paper_problem):
+    base = base_parameters(paper_problem.robot)
+    counted = designed(base)
+    names = counted.names()
+    assert counted.rank == 14 and base.rank == 22
+    leading = [name.split(" ")[0] for name in names]
+    assert not any(n.startswith("offset.") or n.endswith(("xy", "xz", "yz")) for n in leading)
+    # what it keeps is base's own rows: the same combinations
+    kept = [base.names().index(n) for n in names]
+    assert np.array_equal(base.independent[kept], counted.independent)
+    assert np.array_equal(base.combination[kept], counted.combination)
