@@ -22,9 +22,8 @@ counts the base parameters a motion can bring out (:func:`designed`): not the pr
 inertia, whose torques stay far below what the actuators' current resolves, nor the drives'
 offsets, which every motion shows alike. Measured on the simulated robot with
 prototype_plant.toml (identification.toml, 120 s): designed on those 14 of the 22, the
-gravity terms' standard errors fell from 2.5–7 % to 1–3 %, both rails and both joints'
-Coulomb friction came out identified (5–9 %, against one rail and one joint), and the
-plan took 6 s instead of 25 s. The same
+gravity terms' standard errors fell from 2.5–7 % to 1–3 %, the rails' and the joints'
+Coulomb friction's from 8–20 % to 5–9 %, and the plan took 6 s instead of 25 s. The same
 symbolic model as every planner's, solved by IPOPT (limited-memory Hessian; its
 20 coefficients are few): the joint range (hard, :data:`RANGE_CLEARANCE_RAD` inside it),
 the singularity margin, the joint speed, acceleration and jerk less ``margin`` and the
