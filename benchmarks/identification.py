@@ -27,10 +27,10 @@ from spm_opt.identify import identify
 from spm_opt.identify_samples import log_samples
 from spm_opt.model.params import load_robot
 from spm_opt.model.regressor import regressor
+from spm_opt.planners.excitation import with_length
 
 PROBLEM = ROOT / "problems" / "identification.toml"
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
-PERIOD_S = 10.0
 SETTINGS = (2.0, None, 0.02)
 """`spm-opt identify`'s defaults: cutoff (Hz), decimation, smallest joint rate (rad/s)."""
 
@@ -40,10 +40,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=40.0, help="excitation length, s")
     parser.add_argument("--repeats", type=int, default=3, help="runs per fit step, best kept")
     args = parser.parse_args()
-    periods = max(1, round(args.seconds / PERIOD_S))
-    options = so.load_problem(PROBLEM).planner_options["excitation"]
-    excitation = {**options, "duration_s": periods * PERIOD_S, "periods": periods}
-    problem = so.load_problem(PROBLEM, {"planner.excitation": excitation})
+    problem = with_length(so.load_problem(PROBLEM), args.seconds)
 
     started = time.perf_counter()
     trajectory = so.plan(problem, "excitation")

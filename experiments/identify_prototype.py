@@ -44,6 +44,7 @@ from spm_opt.identify import (
 )
 from spm_opt.identify_samples import log_samples
 from spm_opt.model.params import load_robot
+from spm_opt.planners.excitation import with_length
 from spm_opt.report.markdown import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,8 +57,6 @@ position loop's saw-tooth (about −0.11 N·m·s/rad × q̇), at 500 Hz by −0.
 VALIDATION = {"duration_s": 30.0, "periods": 3, "harmonics": 5, "seed": 1}
 LENGTHS_S = (30.0, 60.0)
 """The fit log's first seconds whose standard errors are shown besides the whole log's."""
-PERIOD_S = 10.0
-"""The excitation's period, s (problems/identification.toml's)."""
 IDENTIFY_SETTINGS = (2.0, None, 0.02)
 """cutoff (Hz), decimation, smallest joint rate kept (rad/s): `spm-opt identify`'s
 defaults."""
@@ -94,13 +93,9 @@ def run(trajectory: so.Trajectory, problem: so.Problem, plant, log: Path, backen
 
 
 def truncated(log: Path, seconds: float, out: Path) -> Path:
-    """The first ``seconds`` of a log (its header comments kept)."""
-    lines = log.read_text().splitlines(keepends=True)
-    header = [line for line in lines if line.startswith("#")]
-    table = pd.read_csv(log, comment="#")
-    kept = table[table["time_s"] <= table["time_s"].iloc[0] + seconds]
-    out.write_text("".join(header))
-    kept.to_csv(out, mode="a", index=False)
+    """The first ``seconds`` of a log, as a log."""
+    table = pd.read_csv(log)
+    table[table["time_s"] <= table["time_s"].iloc[0] + seconds].to_csv(out, index=False)
     return out
 
 
@@ -184,9 +179,7 @@ def main() -> int:
     args = parser.parse_args()
     out, logs_dir = args.out, args.out / "logs"
     logs_dir.mkdir(parents=True, exist_ok=True)
-    periods = max(1, round(args.fit_seconds / PERIOD_S))
-    fit = {"duration_s": periods * PERIOD_S, "periods": periods}
-    problem = so.load_problem(PROBLEM, {"planner.excitation": fit})
+    problem = with_length(so.load_problem(PROBLEM), args.fit_seconds)
     plant = load_robot(PLANT)
 
     progress("planning the excitation (about 30 s) and the validation excitation")
@@ -227,7 +220,7 @@ def main() -> int:
         )
     ]
     progress("standard errors against log length")
-    lengths = lengths_table(problem, logs["fit"], logs_dir, fit["duration_s"])
+    lengths = lengths_table(problem, logs["fit"], logs_dir, fit_plan.duration)
 
     progress("ocp-min-energy on the craniotomy with the prior and the identified robot")
     efforts = []

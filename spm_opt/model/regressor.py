@@ -30,6 +30,7 @@ platform. Y is evaluated over many samples by the compiled batch path
 from __future__ import annotations
 
 from functools import cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -49,6 +50,8 @@ DRIVE_PARAMETERS = tuple(
     for joint in (1, 2)
     for term in ("rotor_inertia", "viscous_friction", "coulomb_friction", "offset")
 )
+DRIVE_TERMS = 4
+"""Drive parameters per joint."""
 STANDARD_PARAMETERS = _BODY_PARAMETERS + RAIL_PARAMETERS + DRIVE_PARAMETERS
 """Names of π's entries, in order (38)."""
 UNITS = {
@@ -158,9 +161,14 @@ def regressor(
     drive = np.zeros((n, 2, len(DRIVE_PARAMETERS)))
     _, qd_, qdd_ = arrays
     for joint in range(2):
-        first = 4 * joint
-        drive[:, joint, first] = qdd_[:, joint]
-        drive[:, joint, first + 1] = qd_[:, joint]
-        drive[:, joint, first + 2] = np.sign(qd_[:, joint])
-        drive[:, joint, first + 3] = 1.0
+        terms = drive_columns(qd_[:, joint], qdd_[:, joint], np.sign(qd_[:, joint]))
+        for k, value in enumerate(terms):
+            drive[:, joint, DRIVE_TERMS * joint + k] = value
     return np.concatenate([links, drive], axis=2), payload
+
+
+def drive_columns(qd: Any, qdd: Any, sliding: Any) -> tuple[Any, Any, Any, float]:
+    """One joint's drive columns of Y in :data:`DRIVE_PARAMETERS`' order (rotor inertia,
+    viscous and Coulomb friction, offset): q̈, q̇, ``sliding`` (sign(q̇), or a smooth
+    stand-in) and 1; numpy arrays or CasADi expressions."""
+    return qdd, qd, sliding, 1.0

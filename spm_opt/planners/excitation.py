@@ -48,11 +48,17 @@ import numpy as np
 
 from spm_opt.errors import PlanningError
 from spm_opt.evaluate import evaluate
-from spm_opt.limits import ROBOT, RULES, planner_bounds
+from spm_opt.limits import planner_bounds
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
-from spm_opt.model.regressor import DRIVE_PARAMETERS, STANDARD_PARAMETERS, link_function
-from spm_opt.planners.ocp import dynamics_parameters, load_torque
+from spm_opt.model.regressor import (
+    DRIVE_PARAMETERS,
+    DRIVE_TERMS,
+    STANDARD_PARAMETERS,
+    drive_columns,
+    link_function,
+)
+from spm_opt.planners.ocp import dynamics_parameters, load_torque, range_key
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
@@ -171,11 +177,9 @@ def _design_columns(joint_range: bytes) -> ca.Function:
     links, _ = link_function()(q, qd, qdd, parameters)
     drive = ca.SX.zeros(2, len(DRIVE_PARAMETERS))
     for joint in range(2):
-        first = 4 * joint
-        drive[joint, first] = qdd[joint]
-        drive[joint, first + 1] = qd[joint]
-        drive[joint, first + 2] = ca.tanh(qd[joint] / COULOMB_SMOOTHING_RAD_S)
-        drive[joint, first + 3] = 1.0
+        sliding = ca.tanh(qd[joint] / COULOMB_SMOOTHING_RAD_S)
+        for k, value in enumerate(drive_columns(qd[joint], qdd[joint], sliding)):
+            drive[joint, DRIVE_TERMS * joint + k] = value
     columns = ca.horzcat(ca.reshape(links, 2, -1), drive)
     assert columns.shape[1] == len(STANDARD_PARAMETERS)
     return ca.Function("design_columns", [q, qd, qdd, parameters], [columns])
@@ -227,9 +231,7 @@ class ExcitationPlanner:
         design = _Design(problem, settings, base, centre, basis)
         coefficients, statistics = design.solve()
         trajectory = _trajectory(centre, coefficients, settings, statistics)
-        broken = [
-            v for v in evaluate(problem, trajectory).violations if RULES[v.rule].judges == ROBOT
-        ]
+        broken = evaluate(problem, trajectory).violations  # the robot's: it ignores the contour
         if broken:
             raise PlanningError(f"excitation: the plan breaks {broken[0]}")
         return trajectory
@@ -311,7 +313,7 @@ class _Design:
         q, qd, qdd, jerk = self._motion(x)
         points = settings.points_per_period
         fixed = ca.DM(dynamics.parameter_vector(robot))
-        columns = _design_columns(_range_key(robot.joint_range)).map(points, "serial")
+        columns = _design_columns(range_key(robot.joint_range)).map(points, "serial")
         stacked = columns(q.T, qd.T, qdd.T, ca.repmat(fixed, 1, points))  # 2 × 38·points
         per_point = ca.reshape(stacked, 2 * len(STANDARD_PARAMETERS), points)
         rows = ca.vertcat(*(per_point[base.independent * 2 + j, :].T for j in range(2)))
@@ -322,7 +324,7 @@ class _Design:
         objective = -_log_det(base.rank)(information)
 
         values = dynamics_parameters(robot)
-        joint_torque = _joint_torque(_range_key(robot.joint_range), len(values))
+        joint_torque = _joint_torque(range_key(robot.joint_range), len(values))
         torque = joint_torque.map("torques", "serial", points, [3], [])(q.T, qd.T, qdd.T, values)
         singular = _singularity_rows(bounds.min_singularity_margin + SINGULARITY_CLEARANCE)
         margin = singular.map(points, "serial")(q.T)
@@ -394,6 +396,19 @@ class _Design:
         return np.where(norms > 0.0, norms, 1.0)
 
 
+def with_length(problem: Problem, seconds: float) -> Problem:
+    """``problem`` with an excitation of about ``seconds``: whole periods of the length its
+    ``[planner.excitation]`` gives them, its other settings kept."""
+    settings = EXCITATION.settings(problem)
+    periods = max(1, round(seconds / settings.period_s))
+    table = problem.planner_options.get("excitation", {})
+    options = {
+        **problem.planner_options,
+        "excitation": {**table, "duration_s": periods * settings.period_s, "periods": periods},
+    }
+    return dataclasses.replace(problem, planner_options=options)
+
+
 @cache
 def _joint_torque(joint_range: bytes, size: int) -> ca.Function:
     """The optimal-control planners' joint side torque (:func:`load_torque`) as a Function
@@ -402,10 +417,6 @@ def _joint_torque(joint_range: bytes, size: int) -> ca.Function:
     parameters = ca.SX.sym("parameters", size)
     torque = load_torque(joint_range)(q, qd, qdd, parameters)
     return ca.Function("joint_torque", [q, qd, qdd, parameters], [torque])
-
-
-def _range_key(joint_range: np.ndarray) -> bytes:
-    return np.ascontiguousarray(joint_range, dtype=float).tobytes()
 
 
 def _singularity_rows(minimum: float) -> ca.Function:

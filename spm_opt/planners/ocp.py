@@ -254,9 +254,10 @@ def joint_side_torque(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarr
     )
 
 
-def _range_key(problem: Problem) -> bytes:
-    """The robot's joint range as bytes: the torque table, and so the NLP, depend on it."""
-    return np.ascontiguousarray(problem.robot.joint_range, dtype=float).tobytes()
+def range_key(joint_range: np.ndarray) -> bytes:
+    """A robot's joint range (2, 2), rad, as bytes: the torque table, and so the NLP,
+    depend on it."""
+    return np.ascontiguousarray(joint_range, dtype=float).tobytes()
 
 
 def dynamics_parameters(robot: Robot) -> np.ndarray:
@@ -773,7 +774,12 @@ class OcpPlanner:
             default_fractions(settings.checks_per_interval)[:, None], grid.intervals
         )
         demanded: frozenset[str] = frozenset()
-        shape = (len(problem.segment_durations), settings, with_torque, _range_key(problem))
+        shape = (
+            len(problem.segment_durations),
+            settings,
+            with_torque,
+            range_key(problem.robot.joint_range),
+        )
         starts: list[Trajectory | _Solved | None] = (
             [warm_start] if warm_start is not None else self._starts(problem)
         )
@@ -893,7 +899,7 @@ class OcpPlanner:
         acceptable level is continued strictly from there."""
         started = time.perf_counter()
         segments = len(problem.segment_durations)
-        joint_range = _range_key(problem)
+        joint_range = range_key(problem.robot.joint_range)
         nlp = _nlp(segments, settings, with_torque, joint_range, demanded)
         continued = isinstance(start, _Solution)
         solver = _solver(segments, settings, with_torque, joint_range, demanded, warm=continued)
