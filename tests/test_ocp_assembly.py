@@ -42,7 +42,7 @@ def plain_nlp(grid: Grid, interval: ca.Function, checks: int, n_dynamics: int) -
 @pytest.mark.parametrize(("with_torque", "demanded"), [(False, frozenset()), (True, ON_DEMAND)])
 def test_assembled_derivatives_are_casadis(paper_problem, with_torque, demanded):
     checks, grid = 2, Grid(len(paper_problem.segment_durations), (2, 3, 2))
-    joint_range = ocp._range_key(paper_problem)
+    joint_range = ocp.range_key(paper_problem.robot.joint_range)
     interval = ocp._interval(checks, with_torque, joint_range, demanded)
     n_dynamics = interval.size1_in(5)
     assembled = assemble(grid, interval_functions(interval), ARC_PARAMETERS, checks, n_dynamics)
