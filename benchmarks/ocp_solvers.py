@@ -46,7 +46,7 @@ def stagewise(
     grid = nlp.grid
     m, d, segments = grid.intervals, 3 * grid.segments, grid.segments
     interval = interval_function(nlp.checks, False, None, 0)
-    arcs, dynamics = ocp._arcs(problem), ocp._dynamics_parameters(problem, False)
+    arcs, dynamics = ocp._arcs(problem), np.zeros(0)  # no torque rows: no robot input
     states0, jerks0, durations0 = grid.split(x0)
     states_low, jerks_low, durations_low = grid.split(box["lbx"])
     states_high, jerks_high, durations_high = grid.split(box["ubx"])
@@ -129,7 +129,7 @@ def main() -> None:
     problem = so.load_problem(args.problem)
     planner = so.PLANNERS["ocp-min-time"]
     settings = planner.settings(problem)
-    joint_range = ocp._range_key(problem)
+    joint_range = ocp.range_key(problem.robot.joint_range)
     nlp = ocp._nlp(len(problem.segment_durations), settings, False, joint_range, frozenset())
     grid = nlp.grid
     start = so.plan(problem, "toppra")
