@@ -202,6 +202,26 @@ class Trajectory:
         t = self.time_grid(rate_hz or DEFAULT_RATE_HZ)
         return t, self.position(t), self.velocity(t), self.acceleration(t)
 
+    def time_scaled(self, rate: float) -> Trajectory:
+        """The same path run ``rate`` times as fast: q̃(t) = q(rate · t), rate > 0.
+
+        Each piece keeps its polynomial in the time since it began, its k-th power
+        coefficient times rateᵏ (its Bernstein coefficients as they are); the breakpoints
+        and the landmark times are divided by ``rate``.
+        """
+        if not (np.isfinite(rate) and rate > 0.0):
+            raise InputError(f"rate = {rate!r}: expected a positive number")
+        breaks = self._q.x / rate
+        if isinstance(self._q, BPoly):
+            poly: PPoly | BPoly = BPoly(self._q.c, breaks)
+        else:
+            powers = rate ** np.arange(self._q.c.shape[0] - 1, -1, -1.0)
+            poly = PPoly(self._q.c * powers[:, None, None], breaks)
+        metadata = dict(self.metadata)
+        if self.landmark_times is not None:
+            metadata["landmark_times_s"] = (self.landmark_times / rate).tolist()
+        return Trajectory(poly, metadata)
+
     def resample(self, rate_hz: float) -> Trajectory:
         """A sampled copy at ``rate_hz`` (breakpoints kept), as a CSV file would hold it."""
         return Trajectory.from_samples(*self.samples(rate_hz), metadata=self.metadata)

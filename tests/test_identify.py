@@ -249,7 +249,10 @@ def _log(path: Path, rows: int, moving: bool = True) -> Path:
                 or d / "comparison.csv"
             ),
             (),
-            ("15 of the execution log's 15 columns are missing", "log of spm-opt execute?"),
+            (
+                f"{len(COLUMNS)} of the execution log's {len(COLUMNS)} columns are missing",
+                "log of spm-opt execute?",
+            ),
             id="not-a-log",
         ),
         pytest.param(

@@ -44,6 +44,7 @@ from spm_opt.execution.backend import (
     Measurement,
     hardware_error_names,
 )
+from spm_opt.execution.feed import FeedProfile, FeedRequests, JointLimits, Pace, feed_ceiling
 from spm_opt.execution.log import LogWriter
 from spm_opt.limits import ROBOT, RULES
 from spm_opt.model.actuator import Actuator
@@ -94,6 +95,13 @@ class ExecutionSettings:
         After a stop, longest time spent holding to confirm rest.
     flush_interval_s : float, s
         Longest time a sample waits before it is written to the log.
+    feed : float
+        The feed override the plan starts at, a fraction of its planned pace.
+    max_feed : float
+        Highest override allowed, if every limit allows it (see
+        :func:`~spm_opt.execution.feed.feed_ceiling`).
+    max_hold_s : float, s
+        Longest feed hold; a longer one ends in the safe stop.
     """
 
     rate_hz: float = 100.0
@@ -110,6 +118,9 @@ class ExecutionSettings:
     rest_position_pulses: int = 5
     hold_s: float = 1.0
     flush_interval_s: float = 0.1
+    feed: float = 1.0
+    max_feed: float = 1.5
+    max_hold_s: float = 600.0
 
     def __post_init__(self) -> None:
         checks = {
@@ -126,6 +137,9 @@ class ExecutionSettings:
             "rest_position_pulses": (1, 100_000),
             "hold_s": (0.0, 60.0),
             "flush_interval_s": (1e-3, 0.1),
+            "feed": (0.0, 4.0),
+            "max_feed": (1.0, 4.0),
+            "max_hold_s": (0.0, 86_400.0),
         }
         for name, (low, high) in checks.items():
             value = getattr(self, name)
@@ -134,6 +148,8 @@ class ExecutionSettings:
         for name in ("communication_retries", "rest_position_pulses"):
             if not isinstance(getattr(self, name), int):
                 raise InputError(f"{name} = {getattr(self, name)!r}: expected an integer")
+        if self.feed > self.max_feed:
+            raise InputError(f"feed = {self.feed!r}: expected at most max_feed ({self.max_feed!r})")
         for name in ("settle_s", "hold_s"):
             if getattr(self, name) < self.rest_window_s:
                 raise InputError(
@@ -207,11 +223,48 @@ class StopReport:
     hardware_errors: list[str]
 
 
+@dataclass(frozen=True)
+class RunStatus:
+    """The run as it stands after a control cycle, for a live view (SI).
+
+    Attributes
+    ----------
+    time_s : float, s
+        Since the run's first cycle.
+    phase : str
+        "approach", "plan", "settle", "stop" or "hold" (after a stop).
+    plan_time_s, plan_duration_s : float, s
+        How far along the plan the goal is (τ), and the plan's length.
+    feed, feed_target : float
+        The pace (1: as planned) and the pace it is heading for.
+    held : bool
+        The operator holds the feed.
+    following_error_rad : float or None, rad
+        The larger joint's distance from its goal (None in a cycle not checked).
+    torque_nm : tuple of float, or None, N·m
+        The actuators' torques from their current (None after a failed read).
+    status : str
+        The log's status of the cycle.
+    """
+
+    time_s: float
+    phase: str
+    plan_time_s: float
+    plan_duration_s: float
+    feed: float
+    feed_target: float
+    held: bool
+    following_error_rad: float | None
+    torque_nm: tuple[float, float] | None
+    status: str
+
+
 @dataclass
 class ExecutionResult:
     """How a run ended. ``completed`` is False when it ended in a safe stop; ``reason``
     says why, in one line; ``stop`` says how the stop went; ``signals`` lists every SIGINT
-    and SIGTERM received, with the phase it arrived in."""
+    and SIGTERM received, with the phase it arrived in; ``feed_events`` every hold, resume
+    and override, with its time (s, the log's clock) and plan time, as the header has them."""
 
     completed: bool
     reason: str
@@ -222,6 +275,7 @@ class ExecutionResult:
     backend: dict[str, Any] = field(default_factory=dict)
     stop: StopReport | None = None
     signals: list[str] = field(default_factory=list)
+    feed_events: list[dict[str, Any]] = field(default_factory=list)
 
 
 class _Ticker:
@@ -250,6 +304,7 @@ class _Cycle:
 
     time_s: float
     measurement: Measurement | None = None
+    following_error: np.ndarray | None = None
     read_failed: bool = False
     write_failed: bool = False
     notes: list[str] = field(default_factory=list)
@@ -354,6 +409,40 @@ class Executor:
         self._stop_requested: str | None = None
         self._signals_seen: list[str] = []
         self._phase = "connect"
+        self._requests = FeedRequests(self.settings.feed, self.settings.max_feed)
+        self._feed_events: list[dict[str, Any]] = []
+        self._pace: Pace | None = None
+        self._plan_duration = 0.0
+        self._first_cycle_s: float | None = None
+        self.status: RunStatus | None = None
+        """The run as it stands after the last cycle (None before the first)."""
+
+    # ------------------------------------------------------------ the operator
+    # Each may be called from any thread, before or during a run.
+    def set_feed(self, fraction: float) -> float:
+        """Follow the plan at ``fraction`` of its planned pace (≥ 0; above 1 only as far
+        as the plan's limits allow); returns the feed that applies."""
+        return self._requests.set_feed(fraction)
+
+    def step_feed(self, step: float) -> float:
+        """Change the override by ``step`` (within 10 % and the ceiling); returns it."""
+        return self._requests.step_feed(step)
+
+    def hold(self) -> None:
+        """Bring the tool to rest on the planned path (a feed hold)."""
+        self._requests.hold()
+
+    def resume(self) -> None:
+        """End a feed hold: go on from the same point at the override."""
+        self._requests.resume()
+
+    def toggle_hold(self) -> bool:
+        """Hold if running, resume if held; returns True if now held."""
+        return self._requests.toggle_hold()
+
+    def stop(self, why: str = "stop requested") -> None:
+        """End the run in the safe stop, as SIGINT does."""
+        self._stop_requested = self._stop_requested or why
 
     # ---------------------------------------------------------------- pre-flight
     def check_plan(self, trajectory: Trajectory) -> None:
@@ -397,6 +486,7 @@ class Executor:
         or the robot's position is refused; returns how the run ended otherwise.
         """
         self.check_plan(trajectory)
+        self._requests.ceiling = feed_ceiling(self.problem, trajectory, self.settings.max_feed)
         log_path = Path(log_path)
         if log_path.suffix != ".csv":
             raise InputError(f"log {log_path}: expected a file name ending in .csv")
@@ -428,12 +518,15 @@ class Executor:
                 "problem": self.problem.name,
                 "backend": self.backend.describe(),
                 "settings": dataclasses.asdict(settings),
+                "feed_ceiling": self._requests.ceiling,
                 "software_version": package_version(),
                 "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             },
             settings.flush_interval_s,
         )
         self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
+        self._feed_events, self._pace, self._first_cycle_s = [], None, None
+        self._plan_duration = trajectory.duration
         self._commanded = _Commanded(first.position_rad.copy(), np.zeros(2), np.zeros(2))
         self._last_measurement = first
         self._failed_cycles = self._reads_failed = self._writes_failed = 0
@@ -443,9 +536,9 @@ class Executor:
             try:
                 if approach is not None:
                     self._follow("approach", approach)
-                plan = _plan_segment(trajectory)
-                self._follow("plan", plan)
-                at_rest = self._settle(plan.at(plan.duration)[0])
+                self._follow_plan(trajectory)
+                end = trajectory.position(trajectory.end_time)
+                at_rest = self._settle(end)
                 reason, completed = "completed", True
             except _Stop as stop:
                 reason = str(stop)
@@ -465,6 +558,7 @@ class Executor:
                         "at_rest": at_rest,
                         "stop": None if report is None else dataclasses.asdict(report),
                         "signals": list(self._signals_seen),
+                        "feed_events": list(self._feed_events),
                         "samples": self._writer.samples,
                         "loop": dataclasses.asdict(statistics),
                         "backend": backend_state,
@@ -480,6 +574,7 @@ class Executor:
             backend_state,
             report,
             list(self._signals_seen),
+            list(self._feed_events),
         )
 
     # ------------------------------------------------------------------ phases
@@ -499,6 +594,56 @@ class Executor:
             self._end_cycle(phase, cycle, checked=True)
             if elapsed >= segment.duration:
                 return
+
+    def _follow_plan(self, trajectory: Trajectory) -> None:
+        """Stream the plan's goals at the pace the operator asks for, to the plan's end;
+        each cycle is checked, and a fault or a hold longer than ``max_hold_s`` raises
+        :class:`_Stop`."""
+        self._phase = "plan"
+        settings, requests = self.settings, self._requests
+        limits = JointLimits.of(
+            self.problem, settings.stop_acceleration_rad_s2, settings.stop_jerk_rad_s3
+        )
+        override, held = asked = requests.requested()
+        profile = FeedProfile(
+            trajectory, limits, requests.ceiling, 0.0 if held else override, 0.5 / settings.rate_hz
+        )
+        begin, hold = None, _FeedHold(settings, self.problem.robot.actuator)
+        try:
+            while True:
+                cycle = self._begin_cycle()
+                begin = cycle.time_s if begin is None else begin
+                override, held = requested = requests.requested()
+                pace = profile.advance(cycle.time_s - begin, 0.0 if held else override)
+                for event in _request_events(asked, requested):
+                    self._feed_event(cycle, pace, event)
+                asked = requested
+                self._pace = pace
+                self._check(cycle, self._commanded.position)
+                self._send(cycle, *profile.goal(pace))
+                self._end_cycle("plan", cycle, checked=True)
+                for event in hold.watch(cycle, pace):
+                    self._feed_event(cycle, pace, event)
+                if hold.too_long(cycle.time_s):
+                    reason = f"feed held longer than max_hold_s ({settings.max_hold_s:g} s)"
+                    raise _Stop(reason, cycle, logged=True)
+                if profile.finished(pace):
+                    return
+        finally:
+            self._pace = None
+
+    def _feed_event(self, cycle: _Cycle, pace: Pace, event: str) -> None:
+        """Record a hold, a resume, an override or a hold's progress, with its time."""
+        _LOG.info("%s at %.3f s (plan time %.3f s)", event, cycle.time_s, pace.plan_time_s)
+        self._feed_events.append(
+            {
+                "time_s": cycle.time_s,
+                "event": event,
+                "plan_time_s": pace.plan_time_s,
+                "feed": pace.feed,
+                "feed_target": pace.target,
+            }
+        )
 
     def _settle(self, target: np.ndarray) -> bool:
         """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;
@@ -677,6 +822,7 @@ class Executor:
                 names = ", ".join(hardware_error_names(status_bits))
                 return f"hardware error on actuator {joint + 1}: {names}"
         error = np.abs(measurement.position_rad - expected)
+        cycle.following_error = error
         worst = int(np.argmax(error))
         if error[worst] > self.settings.following_error_rad:
             return (
@@ -703,20 +849,44 @@ class Executor:
                     errors.append(entry)
 
     def _log(self, phase: str, cycle: _Cycle) -> None:
-        """One sample: the goal the actuators hold (the last delivered) and the reading."""
-        goal, measurement = self._commanded.position, cycle.measurement
+        """One sample: the pace along the plan (in its phase), the goal the actuators hold
+        (the last delivered) and the reading; the same as :attr:`status`."""
+        goal, measurement, pace = self._commanded.position, cycle.measurement, self._pace
+        along = None if pace is None else (pace.plan_time_s, pace.feed, pace.target)
+        torque = None
         if measurement is None:
-            self._writer.append(cycle.time_s, phase, goal, None, None, cycle.status)
-            return
-        torque = self._torque_map.torque(measurement.current_a)
-        values = (
-            measurement.position_rad,
-            measurement.velocity_rad_s,
-            measurement.current_a,
-            torque,
-        )
-        self._writer.append(
-            cycle.time_s, phase, goal, values, measurement.hardware_error, cycle.status
+            self._writer.append(cycle.time_s, phase, along, goal, None, None, cycle.status)
+        else:
+            torque = self._torque_map.torque(measurement.current_a)
+            values = (
+                measurement.position_rad,
+                measurement.velocity_rad_s,
+                measurement.current_a,
+                torque,
+            )
+            self._writer.append(
+                cycle.time_s, phase, along, goal, values, measurement.hardware_error, cycle.status
+            )
+        self._update_status(phase, cycle, torque)
+
+    def _update_status(self, phase: str, cycle: _Cycle, torque: np.ndarray | None) -> None:
+        if self._first_cycle_s is None:
+            self._first_cycle_s = cycle.time_s
+        pace, (_, held) = self._pace, self._requests.requested()
+        if pace is None:  # outside the plan phase the goal is not on the plan's clock
+            pace = Pace(self.status.plan_time_s if self.status else 0.0, 0.0, 0.0, 0.0)
+        error = cycle.following_error
+        self.status = RunStatus(
+            time_s=cycle.time_s - self._first_cycle_s,
+            phase=phase,
+            plan_time_s=pace.plan_time_s,
+            plan_duration_s=self._plan_duration,
+            feed=pace.feed,
+            feed_target=pace.target,
+            held=held,
+            following_error_rad=None if error is None else float(np.max(error)),
+            torque_nm=None if torque is None else (float(torque[0]), float(torque[1])),
+            status=cycle.status,
         )
 
     def _ruckig_segment(
@@ -776,14 +946,43 @@ class Executor:
                 signal.signal(s, handler)
 
 
-def _plan_segment(trajectory: Trajectory) -> _Segment:
-    start = trajectory.start_time
+class _FeedHold:
+    """Watches a feed hold: when the feed reached 0, when rest was confirmed, and how long
+    it has lasted."""
 
-    def goal(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        at = start + t
-        return trajectory.position(at), trajectory.velocity(at), trajectory.acceleration(at)
+    def __init__(self, settings: ExecutionSettings, actuator: Actuator) -> None:
+        self._settings, self._actuator = settings, actuator
+        self._since: float | None = None
+        self._rest: _RestWindow | None = None
 
-    return _Segment(trajectory.duration, goal)
+    def watch(self, cycle: _Cycle, pace: Pace) -> list[str]:
+        """The hold's events in this cycle: "held" (the feed reached 0 on the path), "at
+        rest" (rest confirmed, as after a stop)."""
+        if pace.feed > 0.0 or pace.target > 0.0:
+            self._since, self._rest = None, None
+            return []
+        events = []
+        if self._since is None:
+            self._since = cycle.time_s
+            self._rest = _RestWindow(self._settings, self._actuator)
+            events.append("held")
+        if self._rest is not None and self._rest.add(cycle.time_s, cycle.measurement):
+            self._rest = None
+            events.append("at rest")
+        return events
+
+    def too_long(self, time_s: float) -> bool:
+        """The hold has lasted longer than ``max_hold_s``."""
+        return self._since is not None and time_s - self._since > self._settings.max_hold_s
+
+
+def _request_events(before: tuple[float, bool], after: tuple[float, bool]) -> list[str]:
+    """What the operator asked for since ``before`` (override, held): "feed 60%", "hold",
+    "resume"."""
+    events = [] if after[0] == before[0] else [f"feed {after[0]:.0%}"]
+    if after[1] != before[1]:
+        events.append("hold" if after[1] else "resume")
+    return events
 
 
 def _travel(before: Measurement | None, after: Measurement | None) -> list[float] | None:

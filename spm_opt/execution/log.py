@@ -24,6 +24,9 @@ from spm_opt.files import json_default, write_atomically
 COLUMNS = (
     "time_s",
     "phase",
+    "plan_time_s",
+    "feed",
+    "feed_target",
     "goal_theta1_rad",
     "goal_theta2_rad",
     "position_theta1_rad",
@@ -39,8 +42,11 @@ COLUMNS = (
     "status",
 )
 """Columns of the CSV log. ``time_s``: when the cycle began (to the ns), the time its goal
-was sampled at; the goals: what the actuators hold after the cycle (a failed write leaves
-the last goal delivered); measured values are empty in a cycle whose read failed."""
+was sampled at; ``plan_time_s``, ``feed``, ``feed_target``: in the plan phase, how far along
+the plan (s of its own time) the goal was sampled, at what pace (1: as planned, 0: held)
+and the pace it was heading for (empty in other phases); the goals: what the actuators
+hold after the cycle (a failed write leaves the last goal delivered); measured values are
+empty in a cycle whose read failed."""
 
 
 def header_path(log_path: Path) -> Path:
@@ -75,13 +81,17 @@ class LogWriter:
         self,
         time_s: float,
         phase: str,
+        along: tuple[float, float, float] | None,
         goal: np.ndarray,
         measured: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
         hardware_error: tuple[int, int] | None,
         status: str,
     ) -> None:
-        """One sample: ``measured`` is (position, velocity, current, torque) or None."""
-        values = [f"{time_s:.9f}", phase, *(f"{v:.9g}" for v in goal)]
+        """One sample: ``along`` is (plan time, feed, feed target) or None, ``measured``
+        (position, velocity, current, torque) or None."""
+        values = [f"{time_s:.9f}", phase]
+        values += ["", "", ""] if along is None else [f"{v:.12g}" for v in along]
+        values += [f"{v:.9g}" for v in goal]
         if measured is None:
             values += [""] * 8
         else:

@@ -1,0 +1,399 @@
+"""The pace along a plan: feed hold, resume and override that keep the tool on the path.
+
+The executor follows a plan q(τ) through its own time parameter τ, advanced at the feed
+r = dτ/dt (1: as planned). The goal it sends is q(τ); its rate is q′ r, its acceleration
+q″ r² + q′ ṙ and its jerk q‴ r³ + 3 q″ r ṙ + q′ r̈ (primes: derivatives of the plan in τ).
+Only the pace changes, so the goal never leaves the planned path: a feed of 0 holds the
+tool on the contour, and any feed above 0 goes on from the same point.
+
+The feed moves to a new target along a jerk-limited profile: ruckig on the one coordinate
+τ through its velocity interface (its velocity is r, its acceleration ṙ, its jerk r̈),
+computed locally, without waypoints. Its bounds on ṙ and r̈ come from the plan's
+derivatives over the stretch of plan time the change will cover (found by widening the
+stretch until the profile stays inside it), with r between its start and its target:
+
+- acceleration: |q″ r² + q′ ṙ| ≤ A gives ṙ ≤ (A − sign(q′ ṙ) q″ r²) / |q′| at each sample;
+- jerk: |q‴| r³ + 3 |q″| r |ṙ| + |q′| |r̈| ≤ J gives r̈ once ṙ's bound is chosen (ṙ's
+  bound is halved while that shortens the change);
+- speed: r never exceeds the larger of its start and its target, so |q′ r| stays within
+  what the plan at that feed needs, which the ceiling (:func:`feed_ceiling`) keeps within
+  the speed limit.
+
+The bounds use :data:`HEADROOM` of each limit. Every profile is then checked before it is
+used, at samples half a control period apart: the joints' speed, acceleration and jerk
+within the limits as the evaluator allows them (:mod:`spm_opt.limits`), or within what the
+plan itself needs at that feed where that is more (the ceiling's business), and r ≥ 0. A
+change with no room (a time-optimal plan braking at its acceleration limit leaves none to
+brake harder) waits and is tried again the next cycle; the goal goes on as before.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import ruckig
+
+from spm_opt.errors import InputError
+from spm_opt.evaluate import evaluate
+from spm_opt.limits import RULES
+from spm_opt.planners.ruckig import calculate_locally
+from spm_opt.problem import Problem
+from spm_opt.trajectory import Trajectory
+
+HEADROOM = 0.98
+"""Fraction of each joint limit the feed's bounds on ṙ and r̈ are derived for; the rest
+covers the motion between the samples they are derived at."""
+
+MAX_FEED_RATE_PER_S = 20.0
+"""Fastest change of the feed, 1/s, where the plan barely moves (q′ ≈ 0 gives no bound):
+a hold from full feed then takes at least 50 ms."""
+
+MAX_FEED_JERK_PER_S2 = 400.0
+"""Largest r̈, 1/s², where the plan gives no bound."""
+
+FEED_STEP = 0.1
+"""The override's step from the keys, and its lowest value from them (a fraction)."""
+
+CEILING_RESOLUTION = 0.01
+"""The feed ceiling is found to this fraction."""
+
+_ATTEMPTS = 8
+_WINDOW_SAMPLES = 200
+_FIRST_SPAN_S = 0.05
+_TINY = 1e-12
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """The limits every commanded joint motion keeps: rad/s, rad/s², rad/s³."""
+
+    speed: float
+    acceleration: float
+    jerk: float
+
+    @classmethod
+    def of(cls, problem: Problem, acceleration: float, jerk: float) -> JointLimits:
+        """The problem's limits; ``acceleration`` and ``jerk`` where it sets none."""
+        limits = problem.limits
+        return cls(
+            limits.max_joint_speed,
+            limits.max_joint_acceleration or acceleration,
+            limits.max_joint_jerk or jerk,
+        )
+
+
+@dataclass(frozen=True)
+class Pace:
+    """Where the executor is along the plan.
+
+    Attributes
+    ----------
+    plan_time_s : float, s
+        τ, the plan's time since its start.
+    feed : float
+        r = dτ/dt (1: as planned, 0: held).
+    feed_rate_per_s : float, 1/s
+        ṙ.
+    target : float
+        The feed r is moving to.
+    """
+
+    plan_time_s: float
+    feed: float
+    feed_rate_per_s: float
+    target: float
+
+
+def feed_ceiling(problem: Problem, trajectory: Trajectory, most: float) -> float:
+    """The highest feed up to ``most`` (at least 1) at which the plan run that much faster
+    breaks no limit the plan itself keeps, as the evaluator judges it (to 1 %)."""
+    if most <= 1.0:
+        return most
+    kept = {v.rule for v in evaluate(problem, trajectory).violations}
+
+    def allowed(rate: float) -> bool:
+        scaled = trajectory.time_scaled(rate)
+        return {v.rule for v in evaluate(problem, scaled).violations} <= kept
+
+    if allowed(most):
+        return most
+    low, high = 1.0, most
+    while high - low > CEILING_RESOLUTION:
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if allowed(middle) else (low, middle)
+    return low
+
+
+class FeedProfile:
+    """The pace along one plan: τ, r and ṙ at any time of the plan phase.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+    limits : JointLimits
+    ceiling : float
+        The highest feed (see :func:`feed_ceiling`).
+    feed : float
+        The feed at the plan's start (the plan starts at rest, so it may start at any).
+    sample_s : float, s
+        Spacing of the samples a profile is checked at (half the control period).
+    """
+
+    def __init__(
+        self,
+        trajectory: Trajectory,
+        limits: JointLimits,
+        ceiling: float,
+        feed: float,
+        sample_s: float,
+    ) -> None:
+        self._trajectory = trajectory
+        self._start = trajectory.start_time
+        self.duration = trajectory.duration
+        self._limits = limits
+        self._allowed = (
+            RULES["joint speed"].allowed(limits.speed),
+            RULES["joint acceleration"].allowed(limits.acceleration),
+            RULES["joint jerk"].allowed(limits.jerk),
+        )
+        self.ceiling = ceiling
+        self._sample_s = sample_s
+        feed = min(max(feed, 0.0), ceiling)
+        self._origin_s, self._origin = 0.0, (0.0, feed, 0.0)
+        self._motion: ruckig.Trajectory | None = None
+        self._end = self._origin
+        self._target = feed
+
+    def advance(self, time_s: float, target: float) -> Pace:
+        """The pace at ``time_s`` (s since the plan phase began), heading for ``target``
+        (clipped to [0, ceiling]) if a jerk-limited change to it fits the limits now."""
+        target = min(max(target, 0.0), self.ceiling)
+        if target != self._target:
+            state = self._state(time_s)
+            motion = self._change(state, target)
+            if motion is not False:
+                self._origin_s, self._origin, self._target = time_s, state, target
+                self._motion = motion
+                tau = state[0] if motion is None else _end_tau(motion)
+                self._end = (tau, target, 0.0)
+        tau, feed, rate = self._state(time_s)
+        return Pace(min(tau, self.duration), feed, rate, self._target)
+
+    def finished(self, pace: Pace) -> bool:
+        """The plan's end is reached."""
+        return pace.plan_time_s >= self.duration
+
+    def goal(self, pace: Pace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Goal position, rate and acceleration (each (2,), SI) at ``pace``."""
+        t = self._start + pace.plan_time_s
+        trajectory = self._trajectory
+        position = trajectory.position(t)
+        velocity = trajectory.velocity(t)
+        acceleration = trajectory.acceleration(t)
+        return (
+            position,
+            velocity * pace.feed,
+            acceleration * pace.feed**2 + velocity * pace.feed_rate_per_s,
+        )
+
+    # ------------------------------------------------------------------ internals
+    def _state(self, time_s: float) -> tuple[float, float, float]:
+        """(τ, r, ṙ) at ``time_s`` on the current profile, then at its final feed."""
+        elapsed = time_s - self._origin_s
+        motion = self._motion
+        if motion is not None and elapsed < motion.duration:
+            tau, feed, rate = (values[0] for values in motion.at_time(elapsed))
+            return tau, max(feed, 0.0), rate
+        since = elapsed - (motion.duration if motion is not None else 0.0)
+        tau, feed, _ = self._end
+        return tau + feed * since, feed, 0.0
+
+    def _change(
+        self, state: tuple[float, float, float], target: float
+    ) -> ruckig.Trajectory | None | bool:
+        """A checked profile from ``state`` to ``target``; None when no profile is needed
+        (already there, at rest), False when none fits the limits now."""
+        tau, feed, rate = state
+        if abs(feed - target) < _TINY and abs(rate) < _TINY:
+            return None
+        if tau >= self.duration:
+            return None
+        direction = 1.0 if target > feed or (target == feed and rate < 0.0) else -1.0
+        low, high = min(feed, target), max(feed, target)
+        span, shrink = max(high, _TINY) * _FIRST_SPAN_S, 1.0
+        for _ in range(_ATTEMPTS):
+            derivatives = self._derivatives(np.linspace(tau, tau + span, _WINDOW_SAMPLES))
+            rate_bound, jerk_bound = self._bounds(*derivatives, low, high, direction)
+            if rate_bound <= 0.0 or jerk_bound <= 0.0:
+                return False
+            motion = _profile(state, target, shrink * rate_bound, shrink * jerk_bound)
+            covered = _end_tau(motion) - tau
+            if covered > span and tau + span < self.duration:
+                span = 1.5 * covered
+                continue
+            if self._keeps_limits(motion, max(high, feed)):
+                return motion
+            shrink *= 0.5
+        return False
+
+    def _derivatives(self, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q′, q″, q‴ at plan times τ (N,), each (N, 2); zero past the plan's end."""
+        _, velocity, acceleration, jerk = self._trajectory.states(self._start + tau)
+        return velocity, acceleration, jerk
+
+    def _bounds(
+        self,
+        q1: np.ndarray,
+        q2: np.ndarray,
+        q3: np.ndarray,
+        low: float,
+        high: float,
+        direction: float,
+    ) -> tuple[float, float]:
+        """Bounds on |ṙ| and |r̈| (1/s, 1/s²) over samples of the plan's derivatives, for a
+        feed between ``low`` and ``high`` changing in ``direction`` (±1)."""
+        acceleration = HEADROOM * self._limits.acceleration
+        jerk = HEADROOM * self._limits.jerk
+        c = direction * q1
+        moving = np.abs(c) > _TINY
+        rate_bound = MAX_FEED_RATE_PER_S
+        for feed in (low, high):
+            room = acceleration - np.sign(c) * q2 * feed**2
+            if np.any(room[moving] <= 0.0):
+                return 0.0, 0.0
+            if np.any(moving):
+                rate_bound = min(rate_bound, float(np.min(room[moving] / np.abs(c[moving]))))
+        best, best_time = (0.0, 0.0), math.inf
+        change = max(high - low, _TINY)
+        for halving in range(7):
+            rate = rate_bound / 2**halving
+            room = jerk - np.abs(q3) * high**3 - 3.0 * np.abs(q2) * high * rate
+            if np.any(room[moving] <= 0.0):
+                continue
+            jerk_bound = MAX_FEED_JERK_PER_S2
+            if np.any(moving):
+                ratio = room[moving] / np.abs(q1[moving])
+                jerk_bound = min(jerk_bound, float(np.min(ratio)))
+            duration = change / rate + rate / jerk_bound
+            if duration < best_time:
+                best, best_time = (rate, jerk_bound), duration
+        return best
+
+    def _keeps_limits(self, motion: ruckig.Trajectory, most_feed: float) -> bool:
+        """The profile's commanded joint motion, at samples ``sample_s`` apart, within the
+        limits (or the plan's own needs at that feed), with 0 ≤ r ≤ ``most_feed``."""
+        end = self._time_to_reach(motion, self.duration)
+        times = np.append(np.arange(0.0, end, self._sample_s), end)
+        states = np.array([[v[0] for v in motion.at_time(t)] for t in times])
+        tau, feed, rate = states.T
+        if np.any(feed < -1e-9) or np.any(feed > most_feed + 1e-9):
+            return False
+        steps = np.diff(rate) / np.maximum(np.diff(times), _TINY)
+        rate_change = np.maximum(np.abs(np.append(steps, 0.0)), np.abs(np.append(0.0, steps)))
+        q1, q2, q3 = self._derivatives(np.minimum(tau, self.duration))
+        r, rd, rdd = feed[:, None], rate[:, None], rate_change[:, None]
+        speed_limit, acceleration_limit, jerk_limit = self._allowed
+        speed_ok = np.abs(q1 * r) <= speed_limit
+        acceleration_ok = np.abs(q2 * r**2 + q1 * rd) <= np.maximum(
+            acceleration_limit, np.abs(q2) * r**2
+        )
+        jerk_ok = np.abs(q3) * r**3 + 3.0 * np.abs(q2 * r * rd) + np.abs(q1) * rdd <= np.maximum(
+            jerk_limit, np.abs(q3) * r**3
+        )
+        return bool(np.all(speed_ok) and np.all(acceleration_ok) and np.all(jerk_ok))
+
+
+    @staticmethod
+    def _time_to_reach(motion: ruckig.Trajectory, tau: float) -> float:
+        """When the profile's τ reaches ``tau`` (its duration if it does not): past the
+        plan's end the goal rests, whatever the feed."""
+        if _end_tau(motion) <= tau:
+            return motion.duration
+        low, high = 0.0, motion.duration
+        while high - low > 1e-6 * motion.duration:
+            middle = 0.5 * (low + high)
+            low, high = (middle, high) if motion.at_time(middle)[0][0] < tau else (low, middle)
+        return high
+
+
+def _profile(
+    state: tuple[float, float, float], target: float, rate_bound: float, jerk_bound: float
+) -> ruckig.Trajectory:
+    """Ruckig's jerk-limited change of the feed (velocity interface on τ), computed here."""
+    tau, feed, rate = state
+    inp = ruckig.InputParameter(1)
+    inp.control_interface = ruckig.ControlInterface.Velocity
+    inp.current_position = [tau]
+    inp.current_velocity = [feed]
+    inp.current_acceleration = [rate]
+    inp.target_velocity = [target]
+    inp.target_acceleration = [0.0]
+    inp.max_velocity = [max(feed, target, _TINY)]
+    inp.max_acceleration = [rate_bound]
+    inp.max_jerk = [jerk_bound]
+    return calculate_locally(inp, "feed change")
+
+
+def _end_tau(motion: ruckig.Trajectory) -> float:
+    """τ at the profile's end, s."""
+    return float(motion.at_time(motion.duration)[0][0])
+
+
+class FeedRequests:
+    """What the operator asks for, from any thread: a feed override, hold and resume.
+
+    The feed the executor heads for is 0 while held, else the override (clipped to the
+    ceiling by :class:`FeedProfile`). ``ceiling`` bounds the override's steps.
+    """
+
+    def __init__(self, feed: float = 1.0, ceiling: float = 1.0) -> None:
+        self._lock = threading.Lock()
+        self.ceiling = ceiling
+        self._override = _checked_feed(feed)
+        self._held = False
+
+    def set_feed(self, fraction: float) -> float:
+        """Set the override (a fraction of the planned pace, ≥ 0); returns the feed that
+        applies, at most the ceiling."""
+        fraction = _checked_feed(fraction)
+        with self._lock:
+            self._override = fraction
+        return min(fraction, self.ceiling)
+
+    def step_feed(self, step: float) -> float:
+        """Change the override by ``step``, within [``FEED_STEP``, ceiling]; returns it."""
+        with self._lock:
+            stepped = round(min(self._override, self.ceiling) + step, 6)
+            self._override = min(max(stepped, FEED_STEP), self.ceiling)
+            return self._override
+
+    def hold(self) -> None:
+        """Bring the tool to rest on the path."""
+        with self._lock:
+            self._held = True
+
+    def resume(self) -> None:
+        """Go on from where the hold stopped, at the override."""
+        with self._lock:
+            self._held = False
+
+    def toggle_hold(self) -> bool:
+        """Hold if running, resume if held; returns True if now held."""
+        with self._lock:
+            self._held = not self._held
+            return self._held
+
+    def requested(self) -> tuple[float, bool]:
+        """(override, held) as they stand."""
+        with self._lock:
+            return min(self._override, self.ceiling), self._held
+
+
+
+def _checked_feed(fraction: float) -> float:
+    if not (isinstance(fraction, int | float) and math.isfinite(fraction) and fraction >= 0.0):
+        raise InputError(f"feed = {fraction!r}: expected a fraction of the planned pace, ≥ 0")
+    return float(fraction)

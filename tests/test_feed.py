@@ -1,0 +1,258 @@
+"""Feed hold, resume and override on the simulated robot: the tool stays on the planned path.
+
+A run is judged by references that do not share the executor's code:
+
+- the cut: the plant's TRUE joint angles (its trace: no quantisation, no noise) through
+  the forward kinematics onto the skull, against the plan's own cut sampled at 10 kHz;
+- the commanded motion: finite differences of the goals the log holds (means of the goal
+  stream's derivatives, see :mod:`test_execution_faults`), against the problem's limits as
+  the evaluator allows them;
+- rest during a hold: the plant's true speeds and positions from the cycle the executor
+  confirmed rest to the resume.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial import cKDTree
+from test_execution_faults import LOG_DIGITS_ERROR, derivative_estimates
+
+import spm_opt as so
+from spm_opt.errors import InputError
+from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
+from spm_opt.execution.feed import (
+    MAX_FEED_JERK_PER_S2,
+    FeedProfile,
+    FeedRequests,
+    JointLimits,
+    feed_ceiling,
+)
+from spm_opt.execution.plant import StateTrace
+from spm_opt.limits import RULES, path_tolerance
+from spm_opt.model import kinematics
+
+SETTINGS = ExecutionSettings()
+PLAN_PATH_RATE_HZ = 10_000.0
+
+
+class ScriptedRobot(SimulatedRobot):
+    """The simulated robot, with an operator acting at set times of the backend's clock
+    (simulated time runs faster than any thread could follow it)."""
+
+    script: list[tuple[float, Callable[[], object]]]
+
+    def read(self) -> so.execution.Measurement:
+        measurement = super().read()
+        now = self.clock.now()
+        while self.script and now >= self.script[0][0]:
+            _, action = self.script.pop(0)
+            action()
+        return measurement
+
+
+def scripted_run(problem, plan, tmp_path, script, **settings):
+    """Run ``plan`` with ``script`` [(s after the start, executor → action)]; returns
+    the result, the log, its header and the plant's true trace."""
+    backend = ScriptedRobot(problem.robot, start_rad=plan.position(plan.start_time))
+    executor = Executor(problem, backend, ExecutionSettings(**settings))
+    backend.script = [(t, (lambda act=act: act(executor))) for t, act in script]
+    result = executor.run(plan, tmp_path / "run.csv")
+    table, header = read_log(tmp_path / "run.csv")
+    return result, table, header, backend.trace
+
+
+# ------------------------------------------------------------------ the judges
+def plan_cut_tree(problem: so.Problem, plan: so.Trajectory) -> cKDTree:
+    """The plan's cut on the skull, sampled at 10 kHz (m)."""
+    t = np.arange(plan.start_time, plan.end_time, 1.0 / PLAN_PATH_RATE_HZ)
+    return cKDTree(plan.cut_points(problem.contour, np.append(t, plan.end_time)))
+
+
+def cut_distance(problem: so.Problem, tree: cKDTree, q: np.ndarray) -> np.ndarray:
+    """Distance of the cut at joint angles q (N, 2) from the plan's cut, m."""
+    directions = kinematics.forward_kinematics(q, 1.0)
+    return tree.query(problem.contour.cut_points(directions))[0]
+
+
+def assert_the_cut_stayed_on_the_plans_path(problem, plan, trace: StateTrace, table):
+    """Every true sample from the plan's start to the end of the run: within the contour
+    tolerance of the plan's cut (the 10 kHz sampling adds at most 6 µm here)."""
+    arrays = trace.arrays()
+    start = table["time_s"].iloc[0]
+    running = arrays["time_s"] >= start
+    distance = cut_distance(problem, plan_cut_tree(problem, plan), arrays["position_rad"][running])
+    assert np.max(distance) <= path_tolerance(problem), np.max(distance)
+    return distance
+
+
+def assert_commanded_within_limits(table: pd.DataFrame, problem: so.Problem) -> None:
+    """The goals of the plan phase and the settle, by finite differences: speed,
+    acceleration and jerk within the limits as the evaluator allows them."""
+    rows = table[table["phase"].isin(["plan", "settle"])]
+    t = rows["time_s"].to_numpy()
+    q = rows[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+    limits = JointLimits.of(problem, SETTINGS.stop_acceleration_rad_s2, SETTINGS.stop_jerk_rad_s3)
+    rounding = LOG_DIGITS_ERROR * np.max(np.abs(q))
+    for order, limit, rule in (
+        (1, limits.speed, "joint speed"),
+        (2, limits.acceleration, "joint acceleration"),
+        (3, limits.jerk, "joint jerk"),
+    ):
+        spacing = np.min(t[order:] - t[:-order]) / order
+        allowed = RULES[rule].allowed(limit) + 2**order * rounding / spacing**order
+        worst = np.max(np.abs(derivative_estimates(t, q, order)))
+        assert worst <= allowed, (rule, worst, allowed)
+
+
+def holds(events: list[dict]) -> list[dict[str, float]]:
+    """Each hold's times: asked, feed at 0, rest confirmed, resumed (s, the log's clock)."""
+    found, current = [], None
+    for event in events:
+        name = event["event"]
+        if name == "hold":
+            current = {"asked": event["time_s"]}
+        elif name in ("held", "at rest") and current is not None:
+            current[name] = event["time_s"]
+        elif name == "resume" and current is not None:
+            current["resumed"] = event["time_s"]
+            found.append(current)
+            current = None
+    return found
+
+
+def assert_at_rest_during_holds(
+    events: list[dict], trace: StateTrace, problem: so.Problem, expected: int
+) -> None:
+    """Each hold reached rest before its resume, and the plant's true state was at rest
+    from the executor's confirmation to the resume: speeds under the rest speed, each
+    joint within the rest pulses."""
+    found = holds(events)
+    assert len(found) == expected
+    arrays = trace.arrays()
+    pulse = 2 * np.pi / problem.robot.actuator.pulses_per_rev
+    for hold in found:
+        assert hold["asked"] <= hold["held"] <= hold["at rest"] <= hold["resumed"]
+        during = (arrays["time_s"] >= hold["at rest"]) & (arrays["time_s"] <= hold["resumed"])
+        assert np.count_nonzero(during) >= 2
+        assert np.max(np.abs(arrays["velocity_rad_s"][during])) < SETTINGS.rest_speed_rad_s
+        span = np.ptp(arrays["position_rad"][during], axis=0)
+        assert np.all(span < SETTINGS.rest_position_pulses * pulse), span
+
+
+def assert_the_plan_was_completed(result, table, plan) -> None:
+    assert result.completed and result.at_rest, result.reason
+    plan_rows = table[table["phase"] == "plan"]
+    assert plan_rows["plan_time_s"].iloc[-1] == pytest.approx(plan.duration)
+    assert np.all(np.diff(plan_rows["plan_time_s"]) >= 0.0)  # never backwards
+
+
+# ------------------------------------------------------------------ the runs
+THREE_HOLDS_TWO_OVERRIDES = [
+    (2.0, lambda ex: ex.hold()),
+    (3.0, lambda ex: ex.resume()),
+    (4.5, lambda ex: ex.set_feed(0.5)),
+    (6.0, lambda ex: ex.hold()),
+    (7.5, lambda ex: ex.resume()),
+    (9.0, lambda ex: ex.set_feed(1.0)),
+    (12.0, lambda ex: ex.hold()),
+    (12.8, lambda ex: ex.resume()),
+]
+
+
+@pytest.fixture(scope="module")
+def steered_run(hardware_problem, hardware_plan, tmp_path_factory):
+    return scripted_run(
+        hardware_problem,
+        hardware_plan,
+        tmp_path_factory.mktemp("steered"),
+        THREE_HOLDS_TWO_OVERRIDES,
+    )
+
+
+def test_three_holds_and_two_overrides_complete_the_contour_on_the_path(
+    steered_run, hardware_problem, hardware_plan
+):
+    result, table, header, trace = steered_run
+    assert_the_plan_was_completed(result, table, hardware_plan)
+    assert_the_cut_stayed_on_the_plans_path(hardware_problem, hardware_plan, trace, table)
+    assert_commanded_within_limits(table, hardware_problem)
+    assert_at_rest_during_holds(header["feed_events"], trace, hardware_problem, expected=3)
+    names = [e["event"] for e in header["feed_events"]]
+    assert names.count("feed 50%") == 1 and names.count("feed 100%") == 1
+    # the run took longer than the plan by the holds and the half-speed stretch
+    assert table["time_s"].iloc[-1] - table["time_s"].iloc[0] > hardware_plan.duration + 2.5
+
+
+def test_the_log_rows_carry_the_plan_time_feed_and_target(steered_run, hardware_plan):
+    result, table, header, _ = steered_run
+    plan = table[table["phase"] == "plan"]
+    assert plan[["plan_time_s", "feed", "feed_target"]].notna().all().all()
+    assert table.loc[table["phase"] != "plan", "feed"].isna().all()
+    # the goal is the plan at the logged plan time: the pace changed, never the path
+    goals = plan[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+    on_plan = hardware_plan.position(plan["plan_time_s"].to_numpy() + hardware_plan.start_time)
+    np.testing.assert_allclose(goals, on_plan, atol=1e-8)
+    # the plan time advances at the logged feed: the trapezoid rule's error is at most
+    # h³/12 max|r̈| per cycle (and the log's 12 digits)
+    t, tau, feed = (plan[c].to_numpy() for c in ("time_s", "plan_time_s", "feed"))
+    advance = np.diff(tau) - 0.5 * (feed[1:] + feed[:-1]) * np.diff(t)
+    assert np.all(np.abs(advance) <= np.diff(t) ** 3 / 12 * MAX_FEED_JERK_PER_S2 + 1e-9)
+    # the header's events are the rows' targets
+    for event in header["feed_events"]:
+        row = plan.iloc[int(np.argmin(np.abs(plan["time_s"] - event["time_s"])))]
+        assert row["feed_target"] == pytest.approx(event["feed_target"])
+    assert result.feed_events == header["feed_events"]
+
+
+def test_a_hold_longer_than_max_hold_ends_in_the_safe_stop(
+    hardware_problem, hardware_plan, tmp_path
+):
+    result, table, header, trace = scripted_run(
+        hardware_problem, hardware_plan, tmp_path, [(3.0, lambda ex: ex.hold())], max_hold_s=2.0
+    )
+    assert not result.completed and result.at_rest
+    assert "feed held longer than max_hold_s (2 s)" in result.reason
+    held = next(e["time_s"] for e in header["feed_events"] if e["event"] == "held")
+    assert header["stop"]["fault_seen_s"] - held == pytest.approx(2.0, abs=0.02)
+    assert header["stop"]["travel_deg"] is not None
+    assert max(header["stop"]["travel_deg"]) < 0.01  # it was already at rest
+
+
+def test_a_stop_request_from_the_operator_is_the_safe_stop(
+    hardware_problem, hardware_plan, tmp_path
+):
+    result, table, _, _ = scripted_run(
+        hardware_problem, hardware_plan, tmp_path, [(4.0, lambda ex: ex.stop("operator: q"))]
+    )
+    assert not result.completed and result.at_rest
+    assert result.reason == "interrupted (operator: q)"
+    assert table["phase"].iloc[-1] == "hold"
+
+
+@pytest.mark.slow
+def test_fifty_holds_at_random_times_end_at_rest_on_the_path_and_the_plan_completes(
+    hardware_problem, hardware_plan, tmp_path
+):
+    rng = np.random.default_rng(16)
+    tree = plan_cut_tree(hardware_problem, hardware_plan)
+    tolerance = path_tolerance(hardware_problem)
+    for k, hold_at in enumerate(rng.uniform(0.0, hardware_plan.duration, 50)):
+        resume_at = hold_at + 0.6
+        result, table, header, trace = scripted_run(
+            hardware_problem,
+            hardware_plan,
+            tmp_path / str(k),
+            [(hold_at, lambda ex: ex.hold()), (resume_at, lambda ex: ex.resume())],
+        )
+        assert_the_plan_was_completed(result, table, hardware_plan)
+        (hold,) = holds(header["feed_events"])
+        arrays = trace.arrays()
+        at_rest = arrays["time_s"] >= hold["at rest"]
+        at_rest &= arrays["time_s"] <= hold["resumed"]
+        assert np.max(np.abs(arrays["velocity_rad_s"][at_rest])) < SETTINGS.rest_speed_rad_s
+        distance = cut_distance(hardware_problem, tree, arrays["position_rad"][at_rest])
+        assert np.max(distance) <= tolerance, (hold_at, np.max(distance))
