@@ -21,6 +21,7 @@ import numpy as np
 from spm_opt.errors import InputError, SpmOptError, require
 
 PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
+_LOG = logging.getLogger(__name__)
 _VERBOSE = "show the library's info lines on stderr (-vv: debug lines too)"
 
 
@@ -161,6 +162,26 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         metavar="A,B",
         help="sim: where the simulated robot rests at the start (default: the plan's start)",
     )
+    execute.add_argument(
+        "--feed",
+        type=float,
+        default=1.0,
+        metavar="F",
+        help="start at this fraction of the planned pace (default 1)",
+    )
+    execute.add_argument(
+        "--max-hold",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="a feed hold longer than this ends in the safe stop (s, default 600)",
+    )
+    execute.add_argument(
+        "--interactive",
+        action="store_true",
+        help="steer from the terminal: space hold/resume, + and - feed 10%%, q stop "
+        "(sim: runs on the wall clock)",
+    )
 
 
 def _emulate_parser(commands: argparse._SubParsersAction) -> None:
@@ -202,21 +223,30 @@ def _pair(text: str, option: str, kind: type) -> tuple:
 
 
 def _execute(args: argparse.Namespace) -> None:
-    from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
+    from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+    from spm_opt.execution.console import console
     from spm_opt.model.params import load_robot
     from spm_opt.problem import load_problem
     from spm_opt.trajectory import Trajectory
 
-    settings = ExecutionSettings(rate_hz=args.rate, approach=args.approach)
+    settings = ExecutionSettings(
+        rate_hz=args.rate,
+        approach=args.approach,
+        feed=args.feed,
+        max_feed=max(ExecutionSettings.max_feed, args.feed),
+        max_hold_s=args.max_hold,
+    )
     problem = load_problem(args.problem)
     trajectory = Trajectory.from_csv(args.plan)
+    keys = _keys_terminal(args.interactive)
     if args.backend == "sim":
         start = trajectory.position(trajectory.start_time)
         if args.start_deg is not None:
             start = np.radians(_pair(args.start_deg, "--start-deg", float))
         plant = None if args.plant_robot is None else load_robot(args.plant_robot)
+        realtime = args.realtime or keys is not None  # keys need the wall clock
         backend = SimulatedRobot(
-            problem.robot, start_rad=start, realtime=args.realtime, plant_robot=plant
+            problem.robot, start_rad=start, realtime=realtime, plant_robot=plant
         )
     else:
         from spm_opt.execution.dynamixel import DynamixelRobot
@@ -228,7 +258,9 @@ def _execute(args: argparse.Namespace) -> None:
             raise InputError("--port: required with --backend dynamixel (e.g. /dev/ttyUSB0)")
         ids = _pair(args.ids, "--ids", int)
         backend = DynamixelRobot(problem.robot.actuator, args.port, args.baud, ids)
-    result = execute(trajectory, backend, problem, args.log, settings)
+    executor = Executor(problem, backend, settings)
+    with console(executor, problem, trajectory, sys.stderr, keys):
+        result = executor.run(trajectory, args.log)
     loop = result.statistics
     print(
         f"{args.log}: {result.samples} samples, {loop.achieved_rate_hz:.1f} Hz achieved, "
@@ -237,6 +269,16 @@ def _execute(args: argparse.Namespace) -> None:
     if not result.completed:
         at_rest = "at rest" if result.at_rest else "rest not confirmed"
         raise ExecutionStopped(f"safe stop ({at_rest}): {result.reason}")
+
+
+def _keys_terminal(interactive: bool) -> int | None:
+    """The terminal the keys are read from: stdin's, with --interactive, if it is one."""
+    if not interactive:
+        return None
+    if not sys.stdin.isatty():
+        _LOG.warning("--interactive: stdin is not a terminal, so the keys are off")
+        return None
+    return sys.stdin.fileno()
 
 
 class ExecutionStopped(Exception):

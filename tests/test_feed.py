@@ -13,17 +13,22 @@ A run is judged by references that do not share the executor's code:
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import HARDWARE_PROBLEM
 from scipy.spatial import cKDTree
 from test_execution_faults import LOG_DIGITS_ERROR, derivative_estimates
 
 import spm_opt as so
 from spm_opt.errors import InputError
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
+from spm_opt.execution.dynamixel import DynamixelRobot
+from spm_opt.execution.emulator import spawn_emulator
 from spm_opt.execution.feed import (
     MAX_FEED_JERK_PER_S2,
     FeedProfile,
@@ -56,13 +61,13 @@ class ScriptedRobot(SimulatedRobot):
 
 def scripted_run(problem, plan, tmp_path, script, **settings):
     """Run ``plan`` with ``script`` [(s after the start, executor → action)]; returns
-    the result, the log, its header and the plant's true trace."""
+    the result, the log, its header and the plant's true trace (its arrays)."""
     backend = ScriptedRobot(problem.robot, start_rad=plan.position(plan.start_time))
     executor = Executor(problem, backend, ExecutionSettings(**settings))
     backend.script = [(t, (lambda act=act: act(executor))) for t, act in script]
     result = executor.run(plan, tmp_path / "run.csv")
     table, header = read_log(tmp_path / "run.csv")
-    return result, table, header, backend.trace
+    return result, table, header, backend.trace.arrays()
 
 
 # ------------------------------------------------------------------ the judges
@@ -78,10 +83,9 @@ def cut_distance(problem: so.Problem, tree: cKDTree, q: np.ndarray) -> np.ndarra
     return tree.query(problem.contour.cut_points(directions))[0]
 
 
-def assert_the_cut_stayed_on_the_plans_path(problem, plan, trace: StateTrace, table):
+def assert_the_cut_stayed_on_the_plans_path(problem, plan, arrays: dict, table):
     """Every true sample from the plan's start to the end of the run: within the contour
     tolerance of the plan's cut (the 10 kHz sampling adds at most 6 µm here)."""
-    arrays = trace.arrays()
     start = table["time_s"].iloc[0]
     running = arrays["time_s"] >= start
     distance = cut_distance(problem, plan_cut_tree(problem, plan), arrays["position_rad"][running])
@@ -125,14 +129,13 @@ def holds(events: list[dict]) -> list[dict[str, float]]:
 
 
 def assert_at_rest_during_holds(
-    events: list[dict], trace: StateTrace, problem: so.Problem, expected: int
+    events: list[dict], arrays: dict, problem: so.Problem, expected: int
 ) -> None:
     """Each hold reached rest before its resume, and the plant's true state was at rest
     from the executor's confirmation to the resume: speeds under the rest speed, each
     joint within the rest pulses."""
     found = holds(events)
     assert len(found) == expected
-    arrays = trace.arrays()
     pulse = 2 * np.pi / problem.robot.actuator.pulses_per_rev
     for hold in found:
         assert hold["asked"] <= hold["held"] <= hold["at rest"] <= hold["resumed"]
@@ -176,15 +179,52 @@ def steered_run(hardware_problem, hardware_plan, tmp_path_factory):
 def test_three_holds_and_two_overrides_complete_the_contour_on_the_path(
     steered_run, hardware_problem, hardware_plan
 ):
-    result, table, header, trace = steered_run
+    result, table, header, arrays = steered_run
     assert_the_plan_was_completed(result, table, hardware_plan)
-    assert_the_cut_stayed_on_the_plans_path(hardware_problem, hardware_plan, trace, table)
+    assert_the_cut_stayed_on_the_plans_path(hardware_problem, hardware_plan, arrays, table)
     assert_commanded_within_limits(table, hardware_problem)
-    assert_at_rest_during_holds(header["feed_events"], trace, hardware_problem, expected=3)
+    assert_at_rest_during_holds(header["feed_events"], arrays, hardware_problem, expected=3)
     names = [e["event"] for e in header["feed_events"]]
     assert names.count("feed 50%") == 1 and names.count("feed 100%") == 1
     # the run took longer than the plan by the holds and the half-speed stretch
     assert table["time_s"].iloc[-1] - table["time_s"].iloc[0] > hardware_plan.duration + 2.5
+
+
+class Operator(threading.Thread):
+    """Acts on an executor from another thread, at wall-clock times after its first cycle."""
+
+    def __init__(self, executor: Executor, script) -> None:
+        super().__init__(daemon=True)
+        self._executor, self._script = executor, script
+
+    def run(self) -> None:
+        while self._executor.status is None:
+            time.sleep(0.001)
+        start = time.monotonic() - self._executor.status.time_s
+        for at, act in self._script:
+            time.sleep(max(0.0, start + at - time.monotonic()))
+            act(self._executor)
+
+
+@pytest.mark.slow
+def test_three_holds_and_two_overrides_through_the_sdk_and_the_emulator(
+    hardware_problem, hardware_plan, tmp_path
+):
+    trace_path = tmp_path / "plant.npz"
+    with spawn_emulator(problem_file=HARDWARE_PROBLEM, trace_path=trace_path) as emulator:
+        backend = DynamixelRobot(hardware_problem.robot.actuator, emulator.device)
+        executor = Executor(hardware_problem, backend, SETTINGS)
+        operator = Operator(executor, THREE_HOLDS_TWO_OVERRIDES)
+        operator.start()
+        result = executor.run(hardware_plan, tmp_path / "run.csv")
+        operator.join()
+    table, header = read_log(tmp_path / "run.csv")
+    arrays = StateTrace.load(trace_path)
+    assert header["backend"]["backend"] == "dynamixel"
+    assert_the_plan_was_completed(result, table, hardware_plan)
+    assert_the_cut_stayed_on_the_plans_path(hardware_problem, hardware_plan, arrays, table)
+    assert_commanded_within_limits(table, hardware_problem)
+    assert_at_rest_during_holds(header["feed_events"], arrays, hardware_problem, expected=3)
 
 
 def test_the_log_rows_carry_the_plan_time_feed_and_target(steered_run, hardware_plan):
@@ -242,7 +282,7 @@ def test_fifty_holds_at_random_times_end_at_rest_on_the_path_and_the_plan_comple
     tolerance = path_tolerance(hardware_problem)
     for k, hold_at in enumerate(rng.uniform(0.0, hardware_plan.duration, 50)):
         resume_at = hold_at + 0.6
-        result, table, header, trace = scripted_run(
+        result, table, header, arrays = scripted_run(
             hardware_problem,
             hardware_plan,
             tmp_path / str(k),
@@ -250,9 +290,113 @@ def test_fifty_holds_at_random_times_end_at_rest_on_the_path_and_the_plan_comple
         )
         assert_the_plan_was_completed(result, table, hardware_plan)
         (hold,) = holds(header["feed_events"])
-        arrays = trace.arrays()
         at_rest = arrays["time_s"] >= hold["at rest"]
         at_rest &= arrays["time_s"] <= hold["resumed"]
         assert np.max(np.abs(arrays["velocity_rad_s"][at_rest])) < SETTINGS.rest_speed_rad_s
         distance = cut_distance(hardware_problem, tree, arrays["position_rad"][at_rest])
         assert np.max(distance) <= tolerance, (hold_at, np.max(distance))
+
+
+# ------------------------------------------------------------------ the feed alone
+def run_profile(plan: so.Trajectory, problem: so.Problem, script, rate_hz: float = 1000.0):
+    """Drive a :class:`FeedProfile` at ``rate_hz`` through ``script`` [(time s, target)];
+    returns the times, the paces and the goals (position, rate, acceleration)."""
+    limits = JointLimits.of(problem, SETTINGS.stop_acceleration_rad_s2, SETTINGS.stop_jerk_rad_s3)
+    profile = FeedProfile(plan, limits, 1.0, script[0][1], 0.5 / rate_hz)
+    times, paces, goals = [], [], []
+    target, pending = script[0][1], list(script[1:])
+    for k in range(int(10 * plan.duration * rate_hz)):
+        t = k / rate_hz
+        while pending and t >= pending[0][0]:
+            target = pending.pop(0)[1]
+        pace = profile.advance(t, target)
+        times.append(t)
+        paces.append(pace)
+        goals.append(profile.goal(pace))
+        if profile.finished(pace):
+            break
+    return np.array(times), paces, [np.array(g) for g in zip(*goals, strict=True)]
+
+
+@pytest.fixture(scope="module")
+def time_optimal_plan(hardware_problem):
+    """A plan at the joint limits: toppra's, at up to 99 % of the acceleration limit."""
+    return so.plan(hardware_problem, "toppra")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_feed_changes_never_break_a_limit_even_on_a_plan_at_the_limits(
+    seed, hardware_problem, time_optimal_plan
+):
+    rng = np.random.default_rng(seed)
+    plan = time_optimal_plan
+    times = np.sort(rng.uniform(0.0, plan.duration, 6))
+    script = [(0.0, 1.0)] + [(t, float(rng.choice([0.0, 0.3, 0.7, 1.0]))) for t in times]
+    script.append((plan.duration + 0.5, 1.0))  # a hold at the end is released
+    t, paces, (q, qd, qdd) = run_profile(plan, hardware_problem, script)
+    tau = np.array([p.plan_time_s for p in paces])
+    assert paces[-1].plan_time_s == pytest.approx(plan.duration)
+    assert np.all(np.diff(tau) >= 0.0)
+    np.testing.assert_allclose(q, plan.position(tau + plan.start_time), atol=1e-12)
+    limits = JointLimits.of(hardware_problem, 1.0, 10.0)
+    for order, limit, rule in (
+        (1, limits.speed, "joint speed"),
+        (2, limits.acceleration, "joint acceleration"),
+        (3, limits.jerk, "joint jerk"),
+    ):
+        worst = np.max(np.abs(derivative_estimates(t, q, order)))
+        assert worst <= RULES[rule].allowed(limit), (rule, worst)
+    # the goal's rate and acceleration (the safe stop starts from them) are the stream's
+    np.testing.assert_allclose(derivative_estimates(t, q, 1), 0.5 * (qd[1:] + qd[:-1]), atol=2e-4)
+    np.testing.assert_allclose(
+        derivative_estimates(t, qd, 1), 0.5 * (qdd[1:] + qdd[:-1]), atol=0.02 * limits.acceleration
+    )
+
+
+def test_a_hold_on_a_gentle_plan_stops_within_a_few_hundredths_of_its_time(
+    hardware_problem, hardware_plan
+):
+    _, paces, _ = run_profile(hardware_plan, hardware_problem, [(0.0, 1.0), (5.0, 0.0)], 100.0)
+    held = next(k for k, p in enumerate(paces) if p.feed == 0.0)
+    assert held * 0.01 - 5.0 < 0.15
+    assert paces[held].plan_time_s - 5.0 < 0.1
+    assert all(p.feed == 0.0 and p.plan_time_s == paces[held].plan_time_s for p in paces[held:])
+
+
+def test_the_feed_ceiling_is_the_fastest_pace_the_evaluator_accepts(
+    hardware_problem, hardware_plan
+):
+    ceiling = feed_ceiling(hardware_problem, hardware_plan, 2.0)
+    assert 1.0 < ceiling < 2.0
+    assert not so.evaluate(hardware_problem, hardware_plan.time_scaled(ceiling)).violations
+    faster = so.evaluate(hardware_problem, hardware_plan.time_scaled(ceiling + 0.02))
+    assert faster.violations
+    assert feed_ceiling(hardware_problem, hardware_plan, 1.0) == 1.0
+
+
+def test_operator_requests_are_checked_and_clipped():
+    requests = FeedRequests(1.0, ceiling=1.2)
+    for bad in (float("nan"), -0.1, "fast", float("inf")):
+        with pytest.raises(InputError, match="feed = "):
+            requests.set_feed(bad)
+    assert requests.set_feed(3.0) == 1.2
+    assert requests.step_feed(0.1) == pytest.approx(1.2)
+    requests.set_feed(0.15)
+    assert requests.step_feed(-0.1) == pytest.approx(0.1)
+    assert requests.toggle_hold() and requests.requested() == (pytest.approx(0.1), True)
+    requests.resume()
+    assert requests.requested()[1] is False
+
+
+@pytest.mark.parametrize(
+    "settings, field",
+    [
+        ({"feed": -1.0}, "feed"),
+        ({"feed": 2.0}, "feed"),
+        ({"max_feed": 0.5}, "max_feed"),
+        ({"max_hold_s": float("nan")}, "max_hold_s"),
+    ],
+)
+def test_bad_feed_settings_are_one_line_errors(settings, field):
+    with pytest.raises(InputError, match=f"^{field} = "):
+        ExecutionSettings(**settings)
