@@ -305,7 +305,6 @@ class FeedProfile:
         )
         return bool(np.all(speed_ok) and np.all(acceleration_ok) and np.all(jerk_ok))
 
-
     @staticmethod
     def _time_to_reach(motion: ruckig.Trajectory, tau: float) -> float:
         """When the profile's τ reaches ``tau`` (its duration if it does not): past the
@@ -390,7 +389,6 @@ class FeedRequests:
         """(override, held) as they stand."""
         with self._lock:
             return min(self._override, self.ceiling), self._held
-
 
 
 def _checked_feed(fraction: float) -> float:

@@ -1,0 +1,99 @@
+"""The feed's cost in the control loop and before it.
+
+Per control cycle: the goal at the feed's pace (the plan's q, q′ and q″ at τ, what every
+cycle computed before the feed existed: the reference), the pace itself when nothing
+changes, the cycle in which a hold from full feed is planned (ruckig, its bounds from the
+plan's derivatives, its check), and a cycle in which a requested change finds no room and
+waits (on toppra's time-optimal plan, at the joint limits). Once per run: the feed ceiling
+(a bisection of the evaluator on the plan run faster) against one evaluation of the plan
+(the pre-flight check).
+
+    python benchmarks/feed.py [--repeats 5]
+
+Prints a table and writes benchmarks/results/feed.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from timing import ROOT, best_of, write_results
+
+import spm_opt as so
+from spm_opt.execution import ExecutionSettings
+from spm_opt.execution.feed import FeedProfile, JointLimits, feed_ceiling
+
+PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
+CYCLES = 200
+
+
+def profile(problem: so.Problem, plan: so.Trajectory) -> FeedProfile:
+    settings = ExecutionSettings()
+    limits = JointLimits.of(problem, settings.stop_acceleration_rad_s2, settings.stop_jerk_rad_s3)
+    return FeedProfile(plan, limits, 1.0, 1.0, 0.5 / settings.rate_hz)
+
+
+def per_cycle(repeats: int, work) -> float:
+    """Best time of ``CYCLES`` calls of ``work(k)``, per call, µs."""
+    return best_of(repeats, lambda: [work(k) for k in range(CYCLES)]) / CYCLES * 1e6
+
+
+def waiting_time(problem: so.Problem, plan: so.Trajectory) -> float:
+    """A plan time (s) at which a hold from full feed on ``plan`` has to wait."""
+    feed = profile(problem, plan)
+    for k in range(int(plan.duration * 100)):
+        if feed.advance(k * 0.01, 0.0).target != 0.0:
+            return k * 0.01
+    raise RuntimeError("a hold never had to wait on this plan")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    problem = so.load_problem(PROBLEM)
+    cubic = so.plan(problem, "cubic")
+    optimal = so.plan(problem, "toppra")
+    steady = profile(problem, cubic)
+    pace = steady.advance(5.0, 1.0)
+    wait_at = waiting_time(problem, optimal)
+
+    def hold_planned(_: int) -> None:
+        fresh = profile(problem, cubic)
+        fresh.advance(5.0, 0.0)
+
+    def hold_waits(_: int) -> None:
+        fresh = profile(problem, optimal)
+        fresh.advance(wait_at, 0.0)
+
+    cycle = {
+        "goal at the pace (reference)": per_cycle(args.repeats, lambda _: steady.goal(pace)),
+        "pace, nothing changes": per_cycle(args.repeats, lambda k: steady.advance(5.0 + k, 1.0)),
+        "pace, a hold planned (cubic)": per_cycle(args.repeats, hold_planned),
+        "pace, a hold waits (toppra)": per_cycle(args.repeats, hold_waits),
+    }
+    once = {
+        # a fresh copy each time: the evaluator caches what it measured of a trajectory
+        "evaluate the plan (reference)": best_of(
+            args.repeats, lambda: so.evaluate(problem, cubic.time_scaled(1.0))
+        ),
+        "feed ceiling, up to 1.5": best_of(args.repeats, lambda: feed_ceiling(problem, cubic, 1.5)),
+    }
+    results = {"per_cycle_us": {}, "per_run_s": {}}
+    print(f"{'per control cycle':40s} {'µs':>10s} {'ratio':>8s}")
+    reference = cycle["goal at the pace (reference)"]
+    for label, us in cycle.items():
+        results["per_cycle_us"][label] = {"us": us, "ratio_to_reference": us / reference}
+        print(f"{label:40s} {us:10.1f} {us / reference:7.1f}x")
+    print(f"\n{'per run':40s} {'s':>10s} {'ratio':>8s}")
+    reference = once["evaluate the plan (reference)"]
+    for label, seconds in once.items():
+        results["per_run_s"][label] = {"s": seconds, "ratio_to_reference": seconds / reference}
+        print(f"{label:40s} {seconds:10.4f} {seconds / reference:7.1f}x")
+    print("(ratios: against the reference measured in the same run)")
+    write_results("feed", {"problem": PROBLEM.name, "hold_waits_at_s": wait_at, **results})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
