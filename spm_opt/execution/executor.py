@@ -870,6 +870,8 @@ class Executor:
         self._update_status(phase, cycle, torque)
 
     def _update_status(self, phase: str, cycle: _Cycle, torque: np.ndarray | None) -> None:
+        """Replace :attr:`status` (one assignment: a reader in another thread sees the old
+        status or the new one, whole)."""
         if self._first_cycle_s is None:
             self._first_cycle_s = cycle.time_s
         pace, (_, held) = self._pace, self._requests.requested()
