@@ -104,6 +104,7 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
         ["reproduce_paper.py"],
         ["calibrate_prototype.py"],
         ["hardware_verification.py"],
+        ["feed_hold.py", "--holds", "2"],
         pytest.param(["hardware_verification.py", "--backend", "emulator"], marks=pytest.mark.slow),
         pytest.param(["identify_prototype.py", "--fit-seconds", "40"], marks=pytest.mark.slow),
     ],
@@ -117,6 +118,7 @@ def test_every_experiment_script_runs(tmp_path, command):
         "calibrate_prototype.py",
         "hardware_verification.py",
         "identify_prototype.py",
+        "feed_hold.py",
     }
     assert {p.name for p in (ROOT / "experiments").glob("*.py")} == listed
     out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
@@ -142,6 +144,11 @@ def test_every_experiment_script_runs(tmp_path, command):
             "fig20_torque_theta2.png",
             "fig25_motion_capture.png",
         }
+        assert (tmp_path / "executed_cut.png").is_file()
+    if command[0] == "feed_hold.py":
+        rows = json.loads((tmp_path / "feed_hold.json").read_text())
+        assert len(rows) == 2 and all(row["completed"] for row in rows)
+        assert all(0.0 < row["goal_stop_mm"] < row["tool_stop_mm"] < 1.0 for row in rows)
 
 
 def test_the_summary_says_which_plans_share_a_duration(paper_problem):

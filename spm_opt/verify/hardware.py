@@ -14,6 +14,11 @@ Three comparisons, as in the paper:
   paper's centroid distance, and RMS and maximum closest-point distances). Without cameras
   the capture is synthetic: the measured joint path through the forward kinematics, seen
   from an unknown rigid transform with 0.3–0.6 mm noise.
+
+A run the operator held or overrode (the feed) is compared at what was commanded: the plan
+at each row's logged plan time and feed, against run time since the plan phase began; the
+figures shade the holds, and the report lists them from the header's feed events. The
+executed cut (the measured joints on the skull) is compared with the plan's cut.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+from scipy.spatial import cKDTree
 
 from spm_opt.errors import InputError
 from spm_opt.execution.log import read_log
@@ -46,25 +52,42 @@ from spm_opt.verify.motion_capture import (
 )
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 SMOOTHING_S = 0.25
 """Window of the moving average shown beside the raw measured torque, s."""
 
+CUT_SAMPLING_HZ = 10_000.0
+"""Sampling of the plan's cut the executed cut is measured against, per s of plan time
+(on the hardware run's plan, points at most 1.1 µm apart)."""
+
+PACE_COLUMNS = ("plan_time_s", "feed", "feed_target")
+"""The log's columns that say where along the plan each plan-phase row was."""
+
 
 @dataclass(frozen=True)
 class RunSamples:
-    """The plan phase of a run: times since the plan's start and what was measured.
+    """The plan phase of a run: where along the plan each sample was and what was measured.
 
     Attributes
     ----------
+    start_s : float, s
+        When the plan phase began, on the log's clock.
     t : ndarray, shape (N,), s
+        Run time: since the plan phase began (the figures' time axis).
+    feed, feed_target : ndarray, shape (N,)
+        The pace r = dτ/dt (1: as planned, 0: held) and the pace it was heading for.
     planned_q, planned_qd, planned_qdd : ndarray, shape (N, 2), SI
+        What was commanded: q(τ), q′(τ) r and q″(τ) r² + q′(τ) ṙ at the logged plan time τ.
     measured_q : ndarray, shape (N, 2), rad
     measured_torque : ndarray, shape (N, 2), N·m (from the actuators' current)
     """
 
+    start_s: float
     t: np.ndarray
+    feed: np.ndarray
+    feed_target: np.ndarray
     planned_q: np.ndarray
     planned_qd: np.ndarray
     planned_qdd: np.ndarray
@@ -73,25 +96,52 @@ class RunSamples:
 
     @classmethod
     def from_log(cls, trajectory: Trajectory, log: pd.DataFrame) -> RunSamples:
-        """The samples of the log's plan phase (rows whose read failed are left out)."""
+        """The samples of the log's plan phase (rows whose read failed are left out), with
+        the plan taken at each row's logged plan time and feed; ṙ is estimated from the
+        logged feed by central differences over the plan phase."""
         plan = log[log["phase"] == "plan"]
-        start = plan["time_s"].iloc[0] if len(plan) else 0.0
-        plan = plan[plan["time_s"] - start <= trajectory.duration + 1e-9]
-        plan = plan.dropna(subset=["position_theta1_rad"])
-        if len(plan) < 2:
+        missing = [c for c in PACE_COLUMNS if c not in plan or plan[c].isna().any()]
+        if missing:
+            raise InputError(
+                f"log: its plan phase has no {', '.join(missing)} (a log from before the "
+                "feed override?)"
+            )
+        if plan["position_theta1_rad"].notna().sum() < 2:
             raise InputError("log: fewer than 2 measured samples in its plan phase")
-        t = np.minimum(plan["time_s"].to_numpy() - start, trajectory.duration)
-        t = t + trajectory.start_time
-        measured_q = plan[["position_theta1_rad", "position_theta2_rad"]].to_numpy()
-        torque = plan[["torque_theta1_nm", "torque_theta2_nm"]].to_numpy()
+        time_s = plan["time_s"].to_numpy()
+        feed_rate = np.gradient(plan["feed"].to_numpy(), time_s)[:, None]
+        kept = plan["position_theta1_rad"].notna().to_numpy()
+        plan, feed_rate = plan[kept], feed_rate[kept]
+        tau = plan["plan_time_s"].to_numpy() + trajectory.start_time
+        feed = plan["feed"].to_numpy()
+        velocity = trajectory.velocity(tau)
         return cls(
-            t=t,
-            planned_q=trajectory.position(t),
-            planned_qd=trajectory.velocity(t),
-            planned_qdd=trajectory.acceleration(t),
-            measured_q=measured_q,
-            measured_torque=torque,
+            start_s=float(time_s[0]),
+            t=plan["time_s"].to_numpy() - time_s[0],
+            feed=feed,
+            feed_target=plan["feed_target"].to_numpy(),
+            planned_q=trajectory.position(tau),
+            planned_qd=velocity * feed[:, None],
+            planned_qdd=trajectory.acceleration(tau) * feed[:, None] ** 2 + velocity * feed_rate,
+            measured_q=plan[["position_theta1_rad", "position_theta2_rad"]].to_numpy(),
+            measured_torque=plan[["torque_theta1_nm", "torque_theta2_nm"]].to_numpy(),
         )
+
+    @property
+    def feed_changed(self) -> bool:
+        """The run had a hold or an override: its feed or target left 1 somewhere."""
+        return bool(np.any(self.feed != 1.0) or np.any(self.feed_target != 1.0))
+
+    def held_intervals(self) -> list[tuple[float, float]]:
+        """Each stretch of run time (s) the feed was 0: from its first sample at 0 to the
+        first sample after it above 0 (or the last sample)."""
+        edges = np.diff(np.concatenate(([0], (self.feed <= 0.0).astype(int), [0])))
+        begins, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        last = len(self.t) - 1
+        return [
+            (float(self.t[begin]), float(self.t[min(end, last)]))
+            for begin, end in zip(begins, ends, strict=True)
+        ]
 
 
 @dataclass(frozen=True)
@@ -186,6 +236,99 @@ def compare_motion_capture(
     return comparison, registration, tracked
 
 
+@dataclass(frozen=True)
+class Hold:
+    """One hold the operator asked for, from the header's feed events; times in run time
+    (s since the plan phase began), durations from the request, s (None: never reached).
+
+    Attributes
+    ----------
+    asked_s : float, s
+    plan_time_s : float or None, s
+        The plan's time (since its start) where the feed reached 0.
+    to_held_s, to_rest_s : float or None, s
+        From the request to the feed at 0, and to rest confirmed.
+    lasted_s : float, s
+        From the request to the resume, or to the end of the log.
+    resumed : bool
+    """
+
+    asked_s: float
+    plan_time_s: float | None
+    to_held_s: float | None
+    to_rest_s: float | None
+    lasted_s: float
+    resumed: bool
+
+
+def holds_from_events(events: list[dict[str, Any]], start_s: float, end_s: float) -> list[Hold]:
+    """The holds among a run's feed events (the header's ``feed_events``): each from its
+    "hold" to its "resume"; ``start_s`` and ``end_s`` are the plan phase's start and the
+    log's end on the log's clock, s. A feed set to 0 by an override is no hold."""
+    holds, current = [], None
+    for event in events:
+        name, at = event["event"], event["time_s"] - start_s
+        if name == "hold":
+            current = {"asked_s": at, "plan_time_s": None, "to_held_s": None, "to_rest_s": None}
+        elif current is not None and name == "held":
+            current.update(plan_time_s=event["plan_time_s"], to_held_s=at - current["asked_s"])
+        elif current is not None and name == "at rest":
+            current["to_rest_s"] = at - current["asked_s"]
+        elif current is not None and name == "resume":
+            holds.append(Hold(**current, lasted_s=at - current["asked_s"], resumed=True))
+            current = None
+    if current is not None:
+        lasted = end_s - start_s - current["asked_s"]
+        holds.append(Hold(**current, lasted_s=lasted, resumed=False))
+    return holds
+
+
+def override_count(events: list[dict[str, Any]]) -> int:
+    """How many times the operator changed the feed override ("feed 50%" events)."""
+    return sum(event["event"].startswith("feed ") for event in events)
+
+
+@dataclass(frozen=True)
+class CutComparison:
+    """The executed cut against the plan's, on the skull.
+
+    Attributes
+    ----------
+    planned_m : ndarray, shape (M, 3), m
+        The plan's cut, sampled at :data:`CUT_SAMPLING_HZ` of plan time.
+    executed_m : ndarray, shape (N, 3), m
+        The cut at the measured joint angles.
+    distance_m : ndarray, shape (N,), m
+        Each executed point's distance from the nearest sample of the plan's cut.
+    """
+
+    planned_m: np.ndarray
+    executed_m: np.ndarray
+    distance_m: np.ndarray
+
+    @property
+    def max_distance_mm(self) -> float:
+        """The executed cut's largest distance from the plan's cut, mm."""
+        return float(np.max(self.distance_m)) / MM
+
+
+def compare_cut(problem: Problem, trajectory: Trajectory, samples: RunSamples) -> CutComparison:
+    """The cut at the measured joint angles against the plan's cut, sampled finely."""
+    t = np.arange(trajectory.start_time, trajectory.end_time, 1.0 / CUT_SAMPLING_HZ)
+    planned = trajectory.cut_points(problem.contour, np.append(t, trajectory.end_time))
+    directions = kinematics.forward_kinematics(samples.measured_q, 1.0)
+    executed = problem.contour.cut_points(directions)
+    return CutComparison(planned, executed, cKDTree(planned).query(executed)[0])
+
+
+def feed_summary(holds: list[Hold], overrides: int, cut: CutComparison) -> dict[str, Any]:
+    """The holds, the number of overrides and the executed cut's deviation, as plain data."""
+    return {
+        "holds": {"overrides": overrides, "each": [asdict(hold) for hold in holds]},
+        "executed_cut": {"max_distance_mm": cut.max_distance_mm},
+    }
+
+
 def verification_summary(
     torques: TorqueComparison, tracking: TrackingComparison, capture: MotionCaptureComparison
 ) -> dict[str, Any]:
@@ -202,15 +345,24 @@ def verification_summary(
 
 
 # ---------------------------------------------------------------------- figures
+def shade_holds(axis: Axes, samples: RunSamples) -> None:
+    """Shade each stretch of run time the feed was 0, labelled once "feed hold"."""
+    for k, (begin, end) in enumerate(samples.held_intervals()):
+        label = "feed hold" if k == 0 else "_nolegend_"
+        axis.axvspan(begin, end, color="0.88", zorder=0, label=label)
+
+
 def torque_figure(problem: Problem, samples: RunSamples, joint: int) -> Figure:
-    """One actuator's model and measured torques over time (the paper's Fig. 19 or 20)."""
+    """One actuator's model and measured torques over run time (the paper's Fig. 19 or
+    20), holds shaded."""
     from matplotlib.figure import Figure
 
     model = model_torque(problem, samples)[:, joint]
     measured = samples.measured_torque[:, joint]
     figure = Figure(figsize=(8, 4), layout="constrained")
     axis = figure.subplots()
-    axis.plot(samples.t, measured, color="0.7", linewidth=0.8, label="measured (from current)")
+    shade_holds(axis, samples)
+    axis.plot(samples.t, measured, color="0.6", linewidth=0.8, label="measured (from current)")
     axis.plot(
         samples.t,
         smoothed(samples.measured_torque, samples.t)[:, joint],
@@ -220,7 +372,7 @@ def torque_figure(problem: Problem, samples: RunSamples, joint: int) -> Figure:
     axis.plot(samples.t, model, color="tab:blue", label="model (Lagrange, friction)")
     rms = float(np.sqrt(np.mean((measured - model) ** 2)))
     axis.set_title(f"actuator {joint + 1}: torque, RMS difference {rms:.3f} N·m")
-    axis.set_xlabel("time (s)")
+    axis.set_xlabel("run time (s)")
     axis.set_ylabel("torque (N·m)")
     axis.grid(True, alpha=0.3)
     axis.legend(loc="best")
@@ -228,11 +380,14 @@ def torque_figure(problem: Problem, samples: RunSamples, joint: int) -> Figure:
 
 
 def tracking_figure(samples: RunSamples) -> Figure:
-    """Planned and measured joint angles, and their difference (the paper's Fig. 15)."""
+    """Planned and measured joint angles and their difference over run time (the paper's
+    Fig. 15), holds shaded; below them the feed and its target if it ever left 1."""
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(8, 6), layout="constrained")
-    angles, errors = figure.subplots(2, 1, sharex=True)
+    figure = Figure(figsize=(8, 7.5 if samples.feed_changed else 6), layout="constrained")
+    ratios = (3, 3, 1.5) if samples.feed_changed else (1, 1)
+    axes = figure.subplots(len(ratios), 1, sharex=True, height_ratios=ratios)
+    angles, errors = axes[:2]
     for joint, colour in enumerate(("tab:blue", "tab:orange")):
         angles.plot(
             samples.t, samples.planned_q[:, joint] / DEG, color=colour, label=f"θ{joint + 1} plan"
@@ -252,10 +407,51 @@ def tracking_figure(samples: RunSamples) -> Figure:
         )
     angles.set_ylabel("joint angle (deg)")
     errors.set_ylabel("measured − plan (deg)")
-    errors.set_xlabel("time (s)")
-    for axis in (angles, errors):
+    if samples.feed_changed:
+        _feed_panel(axes[2], samples)
+    axes[-1].set_xlabel("run time (s)")
+    for axis in axes:
+        shade_holds(axis, samples)
         axis.grid(True, alpha=0.3)
-        axis.legend(loc="best")
+        axis.legend(loc="best", fontsize=8)
+    return figure
+
+
+def _feed_panel(axis: Axes, samples: RunSamples) -> None:
+    axis.plot(samples.t, samples.feed, color="k", label="feed")
+    axis.plot(samples.t, samples.feed_target, color="tab:red", linestyle="--", label="target")
+    axis.set_ylabel("feed")
+    axis.set_ylim(-0.05, max(1.0, float(np.max(samples.feed_target))) + 0.1)
+
+
+def cut_figure(samples: RunSamples, cut: CutComparison, holds: list[Hold]) -> Figure:
+    """The executed cut against the plan's seen from above (x, y, mm), with a numbered
+    marker where each hold's feed reached 0."""
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(7, 6), layout="constrained")
+    axis = figure.subplots()
+    planned, executed = cut.planned_m / MM, cut.executed_m / MM
+    axis.plot(planned[:, 0], planned[:, 1], color="tab:blue", linewidth=2.0, label="plan")
+    axis.plot(executed[:, 0], executed[:, 1], color="tab:red", linewidth=0.7, label="executed")
+    stops = [
+        (number, hold.asked_s + hold.to_held_s)
+        for number, hold in enumerate(holds, start=1)
+        if hold.to_held_s is not None
+    ]
+    for k, (number, at) in enumerate(stops):
+        x, y = executed[int(np.argmin(np.abs(samples.t - at))), :2]
+        label = "hold: feed at 0" if k == 0 else "_nolegend_"
+        axis.plot(x, y, "o", color="k", markerfacecolor="white", label=label)
+        axis.annotate(str(number), (x, y), xytext=(4, 4), textcoords="offset points")
+    axis.set_title(
+        f"executed cut against the plan: largest distance {cut.max_distance_mm:.3f} mm", fontsize=10
+    )
+    axis.set_xlabel("x (mm)")
+    axis.set_ylabel("y (mm)")
+    axis.set_aspect("equal")
+    axis.grid(True, alpha=0.3)
+    axis.legend(loc="best", fontsize=8)
     return figure
 
 
@@ -307,17 +503,22 @@ def write_verification(
 ) -> list[Path]:
     """Analyse a run's log and write the report and figures into ``out`` (all or none).
 
-    Files: ``hardware_verification.md`` and ``.json`` (the three comparisons),
-    ``fig15_tracking.png``, ``fig19_torque_theta1.png``, ``fig20_torque_theta2.png``,
-    ``fig25_motion_capture.png``.
+    Files: ``hardware_verification.md`` and ``.json`` (the three comparisons, the holds
+    and overrides, the executed cut's deviation), ``fig15_tracking.png``,
+    ``fig19_torque_theta1.png``, ``fig20_torque_theta2.png``, ``fig25_motion_capture.png``,
+    ``executed_cut.png``.
     """
     log, header = read_log(log_path)
     samples = RunSamples.from_log(trajectory, log)
     capture, landmarks = capture_run(problem, samples, seed)
     mocap, _, tracked = compare_motion_capture(problem, samples, capture, landmarks)
+    events = header.get("feed_events", [])
+    holds = holds_from_events(events, samples.start_s, float(log["time_s"].iloc[-1]))
+    cut = compare_cut(problem, trajectory, samples)
     summary = verification_summary(
         compare_torques(problem, samples), compare_tracking(samples), mocap
     )
+    summary.update(feed_summary(holds, override_count(events), cut))
     summary["run"] = {key: header.get(key) for key in ("completed", "reason", "samples", "loop")}
     backend = header.get("backend", {})
     summary["run"]["backend"] = backend.get("backend")
@@ -329,6 +530,7 @@ def write_verification(
         out / "fig19_torque_theta1.png": to_png(torque_figure(problem, samples, 0)),
         out / "fig20_torque_theta2.png": to_png(torque_figure(problem, samples, 1)),
         out / "fig25_motion_capture.png": to_png(capture_figure(samples, problem, tracked, mocap)),
+        out / "executed_cut.png": to_png(cut_figure(samples, cut, holds)),
     }
     write_atomically(files)
     return list(files)
@@ -369,5 +571,48 @@ def _markdown(problem: Problem, summary: dict[str, Any]) -> str:
         f"{mocap['centroid_distance_mm']:.3f} mm (the paper: 0.731 mm); closest-point distance "
         f"RMS {mocap['rms_distance_mm']:.3f} mm, max {mocap['max_distance_mm']:.3f} mm.",
         "",
+        "Executed cut (measured joint angles on the skull): largest distance from the plan's "
+        f"cut {summary['executed_cut']['max_distance_mm']:.3f} mm.",
+        "",
+        *_holds_markdown(summary["holds"]),
     ]
     return "\n".join(lines)
+
+
+def _holds_markdown(holds: dict[str, Any]) -> list[str]:
+    lines = ["## Holds and overrides", ""]
+    if not holds["each"] and not holds["overrides"]:
+        return [*lines, "No holds or overrides.", ""]
+    if holds["each"]:
+        lines += [
+            "Run time since the plan phase began; durations from the request, s.",
+            "",
+            *markdown_table(
+                [
+                    "hold",
+                    "asked, s",
+                    "stopped at plan time, s",
+                    "to feed 0, s",
+                    "to rest, s",
+                    "lasted, s",
+                ],
+                [_hold_row(number, hold) for number, hold in enumerate(holds["each"], start=1)],
+            ),
+            "",
+        ]
+    return [*lines, f"Overrides: {holds['overrides']}.", ""]
+
+
+def _hold_row(number: int, hold: dict[str, Any]) -> list[str]:
+    def seconds(value: float | None) -> str:
+        return "—" if value is None else f"{value:.3f}"
+
+    lasted = seconds(hold["lasted_s"]) + ("" if hold["resumed"] else " (not resumed)")
+    return [
+        str(number),
+        seconds(hold["asked_s"]),
+        seconds(hold["plan_time_s"]),
+        seconds(hold["to_held_s"]),
+        seconds(hold["to_rest_s"]),
+        lasted,
+    ]
