@@ -169,11 +169,11 @@ class KeyReader:
         executor = self._executor
         if key == " ":
             _LOG.info("key: %s", "hold" if executor.toggle_hold() else "resume")
-        elif key in "+=":
+        elif key in ("+", "="):
             _LOG.info("key: feed %.0f %%", 100 * executor.step_feed(FEED_STEP))
-        elif key in "-_":
+        elif key in ("-", "_"):
             _LOG.info("key: feed %.0f %%", 100 * executor.step_feed(-FEED_STEP))
-        elif key in "qQ":
+        elif key in ("q", "Q"):
             executor.stop("operator pressed q")
 
     def _run(self) -> None:
