@@ -21,7 +21,7 @@ from timing import ROOT, best_of, write_results
 
 import spm_opt as so
 from spm_opt.execution import ExecutionSettings
-from spm_opt.execution.feed import FeedProfile, JointLimits, feed_ceiling
+from spm_opt.execution.feed import FeedProfile, feed_ceiling
 
 PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
 CYCLES = 200
@@ -29,8 +29,7 @@ CYCLES = 200
 
 def profile(problem: so.Problem, plan: so.Trajectory) -> FeedProfile:
     settings = ExecutionSettings()
-    limits = JointLimits.of(problem, settings.stop_acceleration_rad_s2, settings.stop_jerk_rad_s3)
-    return FeedProfile(plan, limits, 1.0, 1.0, 0.5 / settings.rate_hz)
+    return FeedProfile(plan, settings.joint_limits(problem), 1.0, 1.0, 0.5 / settings.rate_hz)
 
 
 def per_cycle(repeats: int, work) -> float:

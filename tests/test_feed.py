@@ -33,7 +33,6 @@ from spm_opt.execution.feed import (
     MAX_FEED_JERK_PER_S2,
     FeedProfile,
     FeedRequests,
-    JointLimits,
     feed_ceiling,
 )
 from spm_opt.execution.plant import StateTrace
@@ -99,7 +98,7 @@ def assert_commanded_within_limits(table: pd.DataFrame, problem: so.Problem) -> 
     rows = table[table["phase"].isin(["plan", "settle"])]
     t = rows["time_s"].to_numpy()
     q = rows[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
-    limits = JointLimits.of(problem, SETTINGS.stop_acceleration_rad_s2, SETTINGS.stop_jerk_rad_s3)
+    limits = SETTINGS.joint_limits(problem)
     rounding = LOG_DIGITS_ERROR * np.max(np.abs(q))
     for order, limit, rule in (
         (1, limits.speed, "joint speed"),
@@ -301,7 +300,7 @@ def test_fifty_holds_at_random_times_end_at_rest_on_the_path_and_the_plan_comple
 def run_profile(plan: so.Trajectory, problem: so.Problem, script, rate_hz: float = 1000.0):
     """Drive a :class:`FeedProfile` at ``rate_hz`` through ``script`` [(time s, target)];
     returns the times, the paces and the goals (position, rate, acceleration)."""
-    limits = JointLimits.of(problem, SETTINGS.stop_acceleration_rad_s2, SETTINGS.stop_jerk_rad_s3)
+    limits = SETTINGS.joint_limits(problem)
     profile = FeedProfile(plan, limits, 1.0, script[0][1], 0.5 / rate_hz)
     times, paces, goals = [], [], []
     target, pending = script[0][1], list(script[1:])
@@ -338,7 +337,7 @@ def test_feed_changes_never_break_a_limit_even_on_a_plan_at_the_limits(
     assert paces[-1].plan_time_s == pytest.approx(plan.duration)
     assert np.all(np.diff(tau) >= 0.0)
     np.testing.assert_allclose(q, plan.position(tau + plan.start_time), atol=1e-12)
-    limits = JointLimits.of(hardware_problem, 1.0, 10.0)
+    limits = SETTINGS.joint_limits(hardware_problem)
     for order, limit, rule in (
         (1, limits.speed, "joint speed"),
         (2, limits.acceleration, "joint acceleration"),

@@ -7,7 +7,8 @@ speed, distance from the contour, landmark visits, coverage) are the planner's b
 not the robot's safety. The robot must be where the plan starts, or, on request, is first
 brought there by a jerk-limited ruckig approach. Then a fixed-rate loop on the backend's
 clock reads both actuators, checks them, writes the next goal positions and logs the
-sample.
+sample. The goals follow the plan at the operator's feed (:mod:`spm_opt.execution.feed`):
+held, resumed and overridden from any thread, always on the planned path.
 On a hardware error, a following error beyond the tolerance, a run of cycles with a
 failed read or write longer than the retry budget, SIGINT or SIGTERM, the robot is brought
 to rest by a jerk-limited ruckig stop that starts, in the cycle that saw the fault, from
@@ -156,6 +157,16 @@ class ExecutionSettings:
                     f"{name} = {getattr(self, name)!r}: expected at least rest_window_s "
                     f"({self.rest_window_s!r} s), or rest could never be confirmed"
                 )
+
+    def joint_limits(self, problem: Problem) -> JointLimits:
+        """The limits every commanded motion keeps (the plan at any feed, the approach, the
+        stop): the problem's, with the stop's acceleration and jerk where it sets none."""
+        limits = problem.limits
+        return JointLimits(
+            limits.max_joint_speed,
+            limits.max_joint_acceleration or self.stop_acceleration_rad_s2,
+            limits.max_joint_jerk or self.stop_jerk_rad_s3,
+        )
 
 
 @dataclass(frozen=True)
@@ -601,9 +612,7 @@ class Executor:
         :class:`_Stop`."""
         self._phase = "plan"
         settings, requests = self.settings, self._requests
-        limits = JointLimits.of(
-            self.problem, settings.stop_acceleration_rad_s2, settings.stop_jerk_rad_s3
-        )
+        limits = settings.joint_limits(self.problem)
         override, held = asked = requests.requested()
         profile = FeedProfile(
             trajectory, limits, requests.ceiling, 0.0 if held else override, 0.5 / settings.rate_hz
@@ -896,9 +905,8 @@ class Executor:
     ) -> _Segment:
         """A jerk-limited move from the commanded state: to rest at ``target``, or (None)
         to rest as soon as the limits allow."""
-        limits = self.problem.limits
-        acceleration = limits.max_joint_acceleration or self.settings.stop_acceleration_rad_s2
-        jerk = limits.max_joint_jerk or self.settings.stop_jerk_rad_s3
+        limits = self.settings.joint_limits(self.problem)
+        acceleration, jerk = limits.acceleration, limits.jerk
         inp = ruckig.InputParameter(2)
         inp.current_position = list(commanded.position)
         inp.current_velocity = list(commanded.velocity)
@@ -910,12 +918,10 @@ class Executor:
         if target is None:
             inp.control_interface = ruckig.ControlInterface.Velocity
             inp.target_velocity = [0.0, 0.0]
-            inp.max_velocity = [
-                max(self.problem.limits.max_joint_speed, *np.abs(commanded.velocity))
-            ] * 2
+            inp.max_velocity = [max(limits.speed, *np.abs(commanded.velocity))] * 2
         else:
             inp.target_position = list(target)
-            inp.max_velocity = [min(speed, self.problem.limits.max_joint_speed)] * 2
+            inp.max_velocity = [min(speed, limits.speed)] * 2
         motion = calculate_locally(inp, name)
 
         def goal(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

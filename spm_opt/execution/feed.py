@@ -74,16 +74,6 @@ class JointLimits:
     acceleration: float
     jerk: float
 
-    @classmethod
-    def of(cls, problem: Problem, acceleration: float, jerk: float) -> JointLimits:
-        """The problem's limits; ``acceleration`` and ``jerk`` where it sets none."""
-        limits = problem.limits
-        return cls(
-            limits.max_joint_speed,
-            limits.max_joint_acceleration or acceleration,
-            limits.max_joint_jerk or jerk,
-        )
-
 
 @dataclass(frozen=True)
 class Pace:
