@@ -7,7 +7,9 @@ code, so that every planner receives a problem the robot can carry out.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -21,6 +23,7 @@ from spm_opt import bounds
 from spm_opt.contour import Contour
 from spm_opt.errors import InputError
 from spm_opt.fields import Table, apply_overrides, read_toml
+from spm_opt.files import json_default
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import RPM
 from spm_opt.model.params import MM, Robot, load_robot
@@ -148,6 +151,34 @@ class Problem:
     def max_joint_torque(self) -> float:
         """The torque limit, N·m: the problem's, else the actuator's continuous torque."""
         return self.limits.max_joint_torque or self.robot.actuator.continuous_torque_nm
+
+    @cached_property
+    def fingerprint(self) -> str:
+        """SHA-256 (hex) of what a plan must have been made for: the landmarks, whether the
+        cut is closed, the limits and the robot (every parameter but its name). Names,
+        descriptions, segment durations, planner options and the file's own bytes (its
+        comments, its layout) are left out: a plan made under an equal fingerprint keeps
+        the same limits on the same robot through the same landmarks."""
+        robot = dataclasses.asdict(self.robot)
+        del robot["name"]
+        what = {
+            "landmarks_m": self.landmarks,
+            "closed": self.closed,
+            "limits": dataclasses.asdict(self.limits),
+            "robot": robot,
+        }
+        text = json.dumps(what, sort_keys=True, default=json_default)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+    def record(self) -> dict[str, Any]:
+        """What a plan's metadata records of the problem it was made for: its name, its
+        file and the file's SHA-256, and its :attr:`fingerprint`."""
+        return {
+            "name": self.name,
+            "file": None if self.source is None else str(self.source),
+            "sha256": self.source_sha256,
+            "fingerprint": self.fingerprint,
+        }
 
     @property
     def visit_order(self) -> list[int]:

@@ -7,13 +7,17 @@ hands them over as they are; sampled data (a CSV file) become quintic Hermite pi
 match position, velocity and acceleration at every sample.
 
 On disk: a CSV with columns ``t,q1,q2,qd1,qd2,qdd1,qdd2`` (SI) and a JSON sidecar of the
-same name holding the metadata (planner, problem file and its hash, planner statistics,
-package version, breakpoints).
+same name holding the metadata (planner, the problem it was made for, planner statistics,
+package version, breakpoints) and a record of the samples (their count, duration and the
+SHA-256 of the CSV's bytes), which reading checks: a CSV cut short, edited or replaced is
+refused rather than taken for the plan its sidecar describes.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
+import io
 import json
 from importlib import metadata as package_metadata
 from pathlib import Path
@@ -254,22 +258,28 @@ class Trajectory:
         t, q, qd, qdd = self.samples(rate_hz)
         table = np.column_stack([t, q[:, 0], q[:, 1], qd[:, 0], qd[:, 1], qdd[:, 0], qdd[:, 1]])
         lines = [",".join(COLUMNS)] + [",".join(repr(v) for v in row) for row in table.tolist()]
+        text = "\n".join(lines) + "\n"
         sidecar = {
             **self.metadata,
             "columns": {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2"},
             "breakpoints_s": self.breakpoints.tolist(),
             "spm_opt_version": self.metadata.get("spm_opt_version", package_version()),
+            "samples": _samples_record(text.encode("utf-8"), t),
         }
         return {
-            path: "\n".join(lines) + "\n",
+            path: text,
             sidecar_path(path): json.dumps(sidecar, indent=2, default=json_default) + "\n",
         }
 
     @classmethod
     def from_csv(cls, path: str | Path) -> Trajectory:
-        """Read a trajectory CSV (and its JSON sidecar, when there is one)."""
+        """Read a trajectory CSV (and its JSON sidecar, when there is one).
+
+        Raises :class:`InputError` when the sidecar records samples (every file
+        :meth:`to_csv` writes does) whose bytes are not the CSV's.
+        """
         path = Path(path)
-        t, q, qd, qdd = _read_samples(path)
+        data = _read_bytes(path)
         metadata: dict[str, Any] = {}
         sidecar = sidecar_path(path)
         if sidecar.is_file():
@@ -280,6 +290,8 @@ class Trajectory:
             if not isinstance(metadata, dict):
                 raise InputError(f"{sidecar}: expected a JSON object")
             _check_landmark_times(sidecar, metadata.get("landmark_times_s"))
+            _check_samples_record(path, metadata.get("samples"), data)
+        t, q, qd, qdd = _read_samples(path, data)
         return cls.from_samples(t, q, qd, qdd, metadata)
 
 
@@ -362,13 +374,50 @@ def _check_landmark_times(sidecar: Path, times: Any) -> None:
         raise InputError(f"{sidecar}: landmark_times_s = {shown}: expected a list of times in s")
 
 
-def _read_samples(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _samples_record(data: bytes, t: np.ndarray) -> dict[str, Any]:
+    """What a sidecar records of its CSV: the sample count, the duration (s) and the
+    SHA-256 of the CSV's bytes."""
+    return {
+        "count": len(t),
+        "duration_s": float(t[-1] - t[0]),
+        "sha256": hashlib.sha256(data).hexdigest(),
+    }
+
+
+def _check_samples_record(path: Path, recorded: Any, data: bytes) -> None:
+    """Refuse a CSV whose bytes are not those its sidecar records (no record: nothing to
+    check, as for a sidecar written by hand or by an older spm_opt)."""
+    if recorded is None:
+        return
+    sidecar = sidecar_path(path).name
+    expected = ("count", "duration_s", "sha256")
+    if not isinstance(recorded, dict) or sorted(recorded) != sorted(expected):
+        raise InputError(
+            f"{path.parent / sidecar}: samples = {json.dumps(recorded)[:60]}: expected "
+            f"{{{', '.join(expected)}}} as spm-opt writes them"
+        )
+    if hashlib.sha256(data).hexdigest() != recorded["sha256"]:
+        raise InputError(
+            f"{path}: not the CSV its sidecar {sidecar} records ({recorded['count']} samples "
+            f"over {recorded['duration_s']:g} s, SHA-256 {str(recorded['sha256'])[:12]}…): it "
+            "was cut short, edited or replaced; plan it again"
+        )
+
+
+def _read_bytes(path: Path) -> bytes:
     try:
-        with path.open(newline="", encoding="utf-8") as handle:
-            rows = list(csv.reader(handle))
+        return path.read_bytes()
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as error:
+    except OSError as error:
+        raise InputError(f"{path}: cannot be read ({error})") from None
+
+
+def _read_samples(path: Path, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The samples (t, q, qd, qdd) of a trajectory CSV's bytes, checked."""
+    try:
+        rows = list(csv.reader(io.StringIO(data.decode("utf-8"), newline="")))
+    except UnicodeDecodeError as error:
         raise InputError(f"{path}: cannot be read ({error})") from None
     if not rows or tuple(c.strip() for c in rows[0]) != COLUMNS:
         found = f"header is {','.join(rows[0])!r}" if rows else "empty file"

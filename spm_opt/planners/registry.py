@@ -111,7 +111,7 @@ def plan(
 
     ``warm_start``, a plan of a similar problem, is handed to planners that take one
     (:func:`takes_warm_start`) and ignored by the others. The trajectory's metadata records
-    the planner, the problem (file and hash), the package version and the planner's
+    the planner, the problem (:meth:`Problem.record`), the package version and the planner's
     statistics, with its solve time in s.
     """
     chosen = get_planner(planner)
@@ -130,11 +130,7 @@ def plan(
     statistics.setdefault("solve_time_s", elapsed)
     trajectory.metadata.update(
         planner=chosen.name,
-        problem={
-            "name": problem.name,
-            "file": None if problem.source is None else str(problem.source),
-            "sha256": problem.source_sha256,
-        },
+        problem=problem.record(),
         statistics=statistics,
         spm_opt_version=package_version(),
     )
