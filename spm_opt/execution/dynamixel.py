@@ -11,6 +11,17 @@ Facts from ``docs/dynamixel.md``. One control cycle is two transactions:
   an overload shows in the very next ``read``.
 - ``write_goal``: one ``GroupSyncWrite`` of 4 bytes at 596, which gets no reply.
 
+Replies that are not the reply. Protocol 2.0's status packets carry no sequence number, and
+the SDK clears the port only before it sends: a reply that comes after its request timed
+out lands in the next request's wait, and the SDK takes any status packet of the right id
+for the answer (a late 12-byte reading once passed for the next reading, 37 ms stale, and
+for a Hardware Error Status byte of 137). So every reply is received here with the SDK's
+``rxPacket`` and checked against its request: id, instruction (status) and length; a
+packet that fails is a stale reply, counted and skipped while the request's timeout runs.
+A late reply to the same request would still pass those checks, so after a read fails
+the next one asks for another length (:data:`READ_LENGTHS`), and late replies to the
+failed one are told apart by theirs.
+
 What a failed write is. A broadcast sync write gets no status packet, so the bus cannot
 say that one was lost or refused: the SDK's ``txPacket`` returns ``COMM_SUCCESS`` once the
 port (pyserial, then the kernel's tty buffer) has taken the bytes. A write therefore fails,
@@ -100,9 +111,13 @@ ITEM_NAMES = {
     ADDR_PRESENT_POSITION: "Present Position",
     ADDR_HARDWARE_ERROR: "Hardware Error Status",
 }
-READ_LENGTH = 12
-"""Present Position (611, 4), Present Velocity (615, 4), 619–620 unlisted, Present Current
-(621, 2)."""
+READ_LENGTHS = (12, 14, 15)
+"""Lengths of the sync read at 611, bytes: Present Position (611, 4), Present Velocity (615,
+4), 619–620 unlisted and Present Current (621, 2); then Present Input Voltage (623, 2) and
+Present Temperature (625, 1), read only to make the reply's length differ. Each failed
+read moves on to the next length, so that a late reply to it cannot pass for the reply to
+the next read (a reply must be later than two failed reads' timeouts, about 70 ms, to be
+taken for one of the same length)."""
 POSITION_MODE = 3
 OPERATING_MODES = {0: "torque", 1: "velocity", 3: "position", 4: "extended position"}
 
@@ -118,6 +133,7 @@ start and its check; on 2 cores under 3 busy processes, 5 ms failed 17 of 3000 w
 went out, 20 ms none. Like the SDK's 34 ms reply timeout, it bounds a cycle on a dead line."""
 
 INST_SYNC_WRITE = 0x83
+INST_STATUS = 0x55
 BROADCAST_ID = 0xFE
 ALERT_BIT = 0x80
 """Bit 7 of a status packet's error byte: the device has a Hardware Error Status."""
@@ -211,6 +227,9 @@ class DynamixelRobot:
         them (the device silently drops a sync-written goal beyond them).
     nudge_count : int
         Goals changed by one or more pulses to avoid the SDK's stuffing defect.
+    stale_replies : int
+        Status packets received that did not answer the request in wait (another id or
+        length): late replies to a request that timed out, skipped.
     """
 
     def __init__(
@@ -256,6 +275,7 @@ class DynamixelRobot:
         self.write_timeout_s = float(write_timeout_s)
         self.clock = MonotonicClock()
         self.nudge_count = 0
+        self.stale_replies = 0
         half_turn = actuator.pulses_per_rev // 2
         self.position_limits: list[tuple[int, int]] = [(-half_turn, half_turn)] * 2
         self.model_numbers: list[int | None] = [None, None]
@@ -264,7 +284,8 @@ class DynamixelRobot:
         self._sdk: Any = None
         self._port: Any = None
         self._packets: Any = None
-        self._sync_read: Any = None
+        self._sync_reads: list[Any] = []
+        self._read_turn = 0
         self._sync_write: Any = None
         self._last_goal: list[int] | None = None
 
@@ -303,9 +324,10 @@ class DynamixelRobot:
                     self._transaction(
                         "write Torque Enable",
                         dxl_id,
-                        lambda i=dxl_id: self._packets.write1ByteTxRx(
-                            self._port, i, ADDR_TORQUE_ENABLE, 1
+                        lambda i=dxl_id: self._packets.writeTxOnly(
+                            self._port, i, ADDR_TORQUE_ENABLE, 1, [1]
                         ),
+                        reply_length=0,
                     )
         except BaseException:
             self.close()
@@ -334,7 +356,11 @@ class DynamixelRobot:
             raise InputError(f"dxl_id: {dxl_id!r} is not one of this robot's ids {self.ids}")
         if self._port is None:
             self._open()
-        self._transaction("reboot", dxl_id, lambda: self._packets.reboot(self._port, dxl_id))
+        packet = [0] * 10
+        packet[4], packet[5], packet[7] = dxl_id, 3, self._sdk.INST_REBOOT
+        self._transaction(
+            "reboot", dxl_id, lambda: self._packets.txPacket(self._port, packet), reply_length=0
+        )
 
     # --------------------------------------------------------------------- cycle
     def read(self) -> Measurement:
@@ -411,6 +437,7 @@ class DynamixelRobot:
             "timeout_s": self.timeout_s,
             "write_timeout_s": self.write_timeout_s,
             "nudge_count": self.nudge_count,
+            "stale_replies": self.stale_replies,
             "communication_failures": dict(self.failures),
         }
 
@@ -436,17 +463,29 @@ class DynamixelRobot:
         port.ser.write_timeout = self.write_timeout_s
         self._sdk, self._port = sdk, port
         self._packets = sdk.PacketHandler(2.0)
-        self._sync_read = sdk.GroupSyncRead(port, self._packets, ADDR_PRESENT_POSITION, READ_LENGTH)
+        self._sync_reads = [
+            sdk.GroupSyncRead(port, self._packets, ADDR_PRESENT_POSITION, length)
+            for length in READ_LENGTHS
+        ]
         self._sync_write = sdk.GroupSyncWrite(port, self._packets, ADDR_GOAL_POSITION, 4)
         for dxl_id in self.ids:
-            self._sync_read.addParam(dxl_id)
+            for sync_read in self._sync_reads:
+                sync_read.addParam(dxl_id)
             self._sync_write.addParam(dxl_id, [0, 0, 0, 0])
         self._last_goal = None
 
     def _check_device(self, k: int, dxl_id: int) -> None:
-        reply = self._transaction("ping", dxl_id, lambda: self._ping(dxl_id), allow_alert=True)
-        model = reply[9] | reply[10] << 8  # parameters after the error byte (8)
-        self.model_numbers[k], self.firmware_versions[k] = model, reply[11]
+        packet = [0] * 10
+        packet[4], packet[5], packet[7] = dxl_id, 3, self._sdk.INST_PING
+        reply = self._transaction(
+            "ping",
+            dxl_id,
+            lambda: self._packets.txPacket(self._port, packet),
+            reply_length=3,
+            allow_alert=True,
+        )
+        model = reply[0] | reply[1] << 8
+        self.model_numbers[k], self.firmware_versions[k] = model, reply[2]
         expected = MODEL_NUMBERS[self.actuator.model]
         if model != expected:
             raise InputError(
@@ -470,20 +509,14 @@ class DynamixelRobot:
             self._read_value(dxl_id, ADDR_MAX_POSITION_LIMIT, 4, signed=True),
         )
 
-    def _ping(self, dxl_id: int) -> tuple[Any, int, int]:
-        """Ping that keeps the reply (the SDK's ``ping`` drops the firmware version)."""
-        packet = [0] * 10
-        packet[4], packet[5], packet[7] = dxl_id, 3, self._sdk.INST_PING
-        reply, result, error = self._packets.txRxPacket(self._port, packet)
-        return reply, result, error
-
     def _read_value(
         self, dxl_id: int, address: int, length: int, signed: bool = False, retry: bool = True
     ) -> int:
         data = self._transaction(
             f"read {ITEM_NAMES[address]} ({address})",
             dxl_id,
-            lambda: self._packets.readTxRx(self._port, dxl_id, address, length),
+            lambda: self._packets.readTx(self._port, dxl_id, address, length),
+            reply_length=length,
             allow_alert=address == ADDR_HARDWARE_ERROR,
             retry=retry,
         )
@@ -493,17 +526,22 @@ class DynamixelRobot:
         self,
         what: str,
         dxl_id: int,
-        call: Callable[[], tuple],
+        send: Callable[[], int],
+        reply_length: int,
         allow_alert: bool = False,
         retry: bool = True,
-    ) -> Any:
-        """Run one SDK request-reply call ``(…, result, error)``; return its value.
+    ) -> list[int]:
+        """Send one request to ``dxl_id`` (``send`` returns the SDK's result) and receive
+        its status packet with ``reply_length`` bytes of parameters; returns them.
 
         With ``retry`` (connecting), a failed attempt is counted and retried up to
         ``retries`` times; without (inside ``read``, which counts and retries), one attempt.
         """
         for _ in range(self.retries + 1 if retry else 1):
-            *value, result, error = self._guarded(call)
+            result = self._guarded(send)
+            if result == self._sdk.COMM_SUCCESS:
+                self._port.setPacketTimeout(reply_length + 11)
+                data, result, error = self._receive(dxl_id, reply_length)
             if result == self._sdk.COMM_SUCCESS:
                 break
             if retry:
@@ -517,7 +555,31 @@ class DynamixelRobot:
             raise CommunicationError(
                 f"id {dxl_id}: {what} refused: {self._packets.getRxPacketError(error)}"
             )
-        return value[0] if value else None
+        return data
+
+    def _receive(self, dxl_id: int, length: int) -> tuple[list[int], int, int]:
+        """The status packet from ``dxl_id`` with ``length`` bytes of parameters, as
+        (parameters, the SDK's result, the error byte), received within the timeout set
+        for the request. Any other packet is a stale reply: counted, skipped."""
+        packets, success = self._packets, self._sdk.COMM_SUCCESS
+        while True:
+            packet, result = self._guarded(lambda: packets.rxPacket(self._port, False))
+            if result != success:
+                return [], result, 0
+            if (
+                packet[4] == dxl_id
+                and packet[7] == INST_STATUS
+                and (packet[5] | packet[6] << 8) == length + 4  # + instruction, error, CRC
+            ):
+                return list(packet[9 : 9 + length]), result, packet[8]
+            self.stale_replies += 1
+            logger.debug(
+                "stale reply skipped: id %d, %d bytes (waiting for id %d, %d bytes)",
+                packet[4],
+                (packet[5] | packet[6] << 8) - 4,
+                dxl_id,
+                length,
+            )
 
     def _guarded(self, call: Callable[[], Any]) -> Any:
         """An SDK call with port errors as CommunicationError (and the port made free)."""
@@ -528,19 +590,27 @@ class DynamixelRobot:
             raise CommunicationError(f"port: {self.port}: {exc}") from exc
 
     def _read_once(self) -> Measurement:
+        """One sync read; a failure moves the next read on to the next of
+        :data:`READ_LENGTHS` (see the module's docstring)."""
         if self._port is None:
             raise CommunicationError("read: the port is not open; call connect() first")
-        sdk, packets = self._sdk, self._packets
-        result = self._guarded(self._sync_read.txPacket)
+        try:
+            return self._sync_read(self._read_turn)
+        except CommunicationError:
+            self._read_turn = (self._read_turn + 1) % len(READ_LENGTHS)
+            raise
+
+    def _sync_read(self, turn: int) -> Measurement:
+        """The sync read of length ``READ_LENGTHS[turn]``."""
+        sdk, packets, length = self._sdk, self._packets, READ_LENGTHS[turn]
+        result = self._guarded(self._sync_reads[turn].txPacket)
         if result != sdk.COMM_SUCCESS:
             raise CommunicationError(f"sync read: {packets.getTxRxResult(result)}")
         if self.timeout_s is not None:
             self._port.setPacketTimeoutMillis(self.timeout_s * 1000.0)
         raw, errors = [], []
         for dxl_id in self.ids:
-            data, result, error = self._guarded(
-                lambda i=dxl_id: packets.readRx(self._port, i, READ_LENGTH)
-            )
+            data, result, error = self._receive(dxl_id, length)
             if result != sdk.COMM_SUCCESS:
                 raise CommunicationError(
                     f"id {dxl_id}: no valid reply to the sync read at {ADDR_PRESENT_POSITION}: "
