@@ -19,6 +19,7 @@ import numpy as np
 from spm_opt.execution.emulator.faults import Faults
 from spm_opt.execution.emulator.server import Emulator
 from spm_opt.execution.plant import PlantSettings, StateTrace
+from spm_opt.execution.realtime import frozen_heap
 from spm_opt.model.params import Robot
 
 DEFAULT_ROBOT = Path(__file__).resolve().parents[3] / "problems" / "robots" / "prototype.toml"
@@ -58,8 +59,9 @@ def serve(
         trace = None if trace_path is None else StateTrace()
         emulator = Emulator(robot, ids, start_rad, faults, PlantSettings(seed=seed), trace=trace)
         try:
-            announce(emulator.device)
-            emulator.serve_forever(stop)
+            with frozen_heap():  # before the device is announced: collecting takes time
+                announce(emulator.device)
+                emulator.serve_forever(stop)
         finally:
             emulator.close()
             if trace is not None:
