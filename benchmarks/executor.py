@@ -1,6 +1,7 @@
 """The executor's control loop: achieved rate and period error at 100, 250 and 500 Hz.
 
-Runs a 6 s move (the first 6 s of the faster craniotomy plan) through the real
+Runs a 6 s move (from the faster craniotomy plan's start to where that plan is after 6 s,
+quintic, from rest to rest as the executor requires) through the real
 ``dynamixel-sdk`` against the emulator in a child process on a pseudo-terminal, and, as
 the reference measured in the same run, through the simulated robot on the wall clock (the
 same loop without serial I/O). Prints a table and writes benchmarks/results/executor.json.
@@ -29,15 +30,22 @@ from spm_opt.execution.emulator import spawn_emulator
 PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
 
 
-def _window(trajectory: so.Trajectory, seconds: float) -> so.Trajectory:
-    """The trajectory's first ``seconds``, sampled at 1 kHz."""
+def _move(problem: so.Problem, trajectory: so.Trajectory, seconds: float) -> so.Trajectory:
+    """A quintic move from rest at the trajectory's start to rest where it is after
+    ``seconds``, sampled at 1 kHz, made for ``problem``."""
     t = np.linspace(0.0, seconds, int(seconds * 1000) + 1)
+    tau = t / seconds
+    s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+    ds = (30 * tau**2 - 60 * tau**3 + 30 * tau**4) / seconds
+    dds = (60 * tau - 180 * tau**2 + 120 * tau**3) / seconds**2
+    start, end = trajectory.position([0.0, seconds])
+    span = end - start
     return so.Trajectory.from_samples(
         t,
-        trajectory.position(t),
-        trajectory.velocity(t),
-        trajectory.acceleration(t),
-        {"planner": "cubic (window)"},
+        start + s[:, None] * span,
+        ds[:, None] * span,
+        dds[:, None] * span,
+        {"planner": "quintic", "problem": problem.record()},
     )
 
 
@@ -49,7 +57,7 @@ def main() -> int:
     rates = [float(r) for r in args.rates.split(",")]
 
     problem = so.load_problem(PROBLEM)
-    move = _window(so.plan(problem, "cubic"), args.seconds)
+    move = _move(problem, so.plan(problem, "cubic"), args.seconds)
     start = move.position(0.0)
     rows = []
     with tempfile.TemporaryDirectory() as scratch:

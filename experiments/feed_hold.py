@@ -47,7 +47,10 @@ PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
 LIMITS = ROOT / "problems" / "craniotomy_hardware.toml"
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 RESUME_AFTER_S = 1.5
-SETTINGS = ExecutionSettings()
+SETTINGS = ExecutionSettings(other_problem=True)
+"""The paper's plan is made for the paper's problem, whose jerk limit its acceleration step
+from rest breaks; it runs here under craniotomy_hardware.toml's limits (the same landmarks
+and robot), which the executor allows only when asked."""
 
 
 class _Operator(SimulatedRobot):

@@ -71,7 +71,7 @@ def main() -> int:
     print(f"{result.reason}: {result.samples} samples", file=sys.stderr)
     for path in [log, *write_verification(problem, trajectory, log, args.out, args.seed)]:
         print(path)
-    return 0 if result.completed else 1
+    return 0 if result.succeeded else 1
 
 
 if __name__ == "__main__":

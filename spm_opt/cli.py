@@ -14,11 +14,14 @@ import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
-from spm_opt.errors import InputError, SpmOptError, require
+from spm_opt.errors import InputError, RunInterrupted, SpmOptError, require
+
+if TYPE_CHECKING:
+    from spm_opt.execution import ExecutionResult
 
 PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
 _LOG = logging.getLogger(__name__)
@@ -154,6 +157,11 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         "--approach", action="store_true", help="first move to the plan's start if away from it"
     )
     execute.add_argument(
+        "--other-problem",
+        action="store_true",
+        help="run a plan made for another problem (or with no sidecar) under --problem's limits",
+    )
+    execute.add_argument(
         "--realtime", action="store_true", help="sim: run on the wall clock (default: fast)"
     )
     execute.add_argument(
@@ -235,6 +243,7 @@ def _execute(args: argparse.Namespace) -> None:
         feed=args.feed,
         max_feed=max(ExecutionSettings.max_feed, args.feed),
         max_hold_s=args.max_hold,
+        other_problem=args.other_problem,
     )
     problem = load_problem(args.problem)
     trajectory = Trajectory.from_csv(args.plan)
@@ -266,9 +275,24 @@ def _execute(args: argparse.Namespace) -> None:
         f"{args.log}: {result.samples} samples, {loop.achieved_rate_hz:.1f} Hz achieved, "
         f"period error p99 {loop.period_error_p99_ms:.3f} ms, {loop.overruns} overruns"
     )
-    if not result.completed:
-        at_rest = "at rest" if result.at_rest else "rest not confirmed"
-        raise ExecutionStopped(f"safe stop ({at_rest}): {result.reason}")
+    if not result.succeeded:
+        raise ExecutionStopped(_outcome(result))
+
+
+def _outcome(result: ExecutionResult) -> str:
+    """A run that did not succeed, in one line: why, and after a safe stop how far each
+    joint travelled after the fault and when rest was proven."""
+    if result.stop is None:
+        return result.reason
+    stop = result.stop
+    line = f"safe stop: {result.reason}"
+    if stop.travel_deg is not None:
+        line += "; travel after the fault " + ", ".join(
+            f"theta{j + 1} {travel:.2f} deg" for j, travel in enumerate(stop.travel_deg)
+        )
+    if stop.duration_s is not None:
+        return f"{line}; at rest {stop.duration_s:.2f} s after it"
+    return f"{line}; rest {stop.rest}"
 
 
 def _keys_terminal(interactive: bool) -> int | None:
@@ -282,7 +306,8 @@ def _keys_terminal(interactive: bool) -> int | None:
 
 
 class ExecutionStopped(Exception):
-    """A run that ended in a safe stop: the command exits with status 1."""
+    """A run that ended in a safe stop, or without rest proven: the command exits with
+    status 1."""
 
 
 def _emulate(args: argparse.Namespace) -> None:
@@ -495,6 +520,9 @@ def _run(args: argparse.Namespace) -> int:
         for module, needed_by in _optional_modules(args):
             require(module, needed_by)
         _COMMANDS[args.command](args)
+    except RunInterrupted as interrupted:
+        print(f"spm-opt: interrupted: {interrupted}", file=sys.stderr)
+        return 130
     except SpmOptError as error:
         print(f"spm-opt: error: {error}", file=sys.stderr)
         return 2

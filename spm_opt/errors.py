@@ -8,6 +8,7 @@
     ├── PlanningError                a planner could not produce a plan for a valid problem
     ├── CommunicationError           a transaction with a device failed (timeout, corrupt reply)
     ├── DeviceError                  a device reports a fault (a hardware error at connection)
+    ├── RunInterrupted               a run stopped before the robot moved (nothing written)
     └── MissingDependency (ImportError)  an optional package is not installed
 
 Messages are one line naming the field, the value and what is allowed; the command line
@@ -62,6 +63,11 @@ class CommunicationError(SpmOptError):
 
 class DeviceError(SpmOptError):
     """A device reports a fault of its own (e.g. an actuator's hardware error status)."""
+
+
+class RunInterrupted(SpmOptError):
+    """A stop was asked for (SIGINT, SIGTERM, ``Executor.stop``) during pre-flight: the
+    run ended before connecting, so nothing moved and nothing was written."""
 
 
 class MissingDependency(SpmOptError, ImportError):

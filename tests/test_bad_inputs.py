@@ -600,6 +600,11 @@ def hardware_plan_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
         ),
         pytest.param(
             ["--problem", str(ROOT / "problems" / "craniotomy_bone_flap.toml")],
+            ("plan refused: the plan was made for craniotomy_hardware", "--other-problem"),
+            id="other-problem",
+        ),
+        pytest.param(
+            ["--problem", str(ROOT / "problems" / "craniotomy_bone_flap.toml"), "--other-problem"],
             ("plan refused: theta", "acceleration step"),
             id="limit-broken",
         ),

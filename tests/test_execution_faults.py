@@ -89,8 +89,8 @@ LOG_DIGITS_ERROR = 5e-10
 """Relative rounding of a goal written to the log with 9 significant digits."""
 
 
-def short_move() -> so.Trajectory:
-    """A 3 s quintic move from rest at (0, 0) to rest at (6, −4) deg."""
+def short_move(problem: so.Problem) -> so.Trajectory:
+    """A 3 s quintic move from rest at (0, 0) to rest at (6, −4) deg, made for ``problem``."""
     t = np.linspace(0.0, 3.0, 301)
     tau = t / 3.0
     s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
@@ -98,13 +98,17 @@ def short_move() -> so.Trajectory:
     dds = (60 * tau - 180 * tau**2 + 120 * tau**3) / 9.0
     span = np.array([6.0, -4.0]) * DEG
     return so.Trajectory.from_samples(
-        t, s[:, None] * span, ds[:, None] * span, dds[:, None] * span, {"planner": "test"}
+        t,
+        s[:, None] * span,
+        ds[:, None] * span,
+        dds[:, None] * span,
+        {"planner": "test", "problem": problem.record()},
     )
 
 
 @pytest.fixture(scope="module")
-def move() -> so.Trajectory:
-    return short_move()
+def move(hardware_problem: so.Problem) -> so.Trajectory:
+    return short_move(hardware_problem)
 
 
 @dataclass(frozen=True)
@@ -247,13 +251,15 @@ def _run_on_the_wire(problem, trajectory, faults, tmp_path):
         backend = DynamixelRobot(problem.robot.actuator, emulator.device)
         result = execute(trajectory, backend, problem, tmp_path / "run.csv", SETTINGS)
     table, header = read_log(tmp_path / "run.csv")
-    return result, table, header, StateTrace.load(trace_path)
+    return result, table, header, StateTrace.load(trace_path, header["clock_origin_s"])
 
 
 def test_the_move_completes_through_the_sdk_and_the_emulator(hardware_problem, move, tmp_path):
     result, table, header, trace = _run_on_the_wire(hardware_problem, move, Faults(), tmp_path)
     assert result.completed and result.at_rest and header["stop"] is None
     assert header["backend"]["backend"] == "dynamixel"
+    # the log starts at 0; its origin on the monotonic clock is in the header
+    assert 0.0 <= table["time_s"].iloc[0] < PERIOD_S and header["clock_origin_s"] > 0.0
     plan = table[table["phase"] == "plan"]
     t = plan["time_s"].to_numpy() - plan["time_s"].iloc[0]
     measured = plan[["position_theta1_rad", "position_theta2_rad"]].to_numpy()

@@ -28,8 +28,8 @@ DEG = np.pi / 180.0
 
 
 @pytest.fixture(scope="module")
-def move() -> so.Trajectory:
-    return short_move()
+def move(hardware_problem: so.Problem) -> so.Trajectory:
+    return short_move(hardware_problem)
 
 
 def _between(start: float, end: float):  # noqa: ANN202

@@ -57,7 +57,7 @@ def test_the_log_holds_every_sample_with_torque_from_the_current_map(
     current = table[["current_theta1_a", "current_theta2_a"]].to_numpy()
     torque = table[["torque_theta1_nm", "torque_theta2_nm"]].to_numpy()
     np.testing.assert_allclose(torque, current * 14.0 / 1.9, rtol=1e-6)
-    assert header["problem"] == hardware_problem.name
+    assert header["problem"] == hardware_problem.record()
     assert header["backend"]["backend"] == "simulated"
     assert header["settings"]["rate_hz"] == 100.0
     assert header["plan"]["planner"] == "cubic"
@@ -172,27 +172,3 @@ def test_bad_settings_are_one_line_errors():
         ExecutionSettings(rate_hz=0)
     with pytest.raises(so.InputError, match="following_error_rad = nan"):
         ExecutionSettings(following_error_rad=float("nan"))
-
-
-class _FailingRobot(SimulatedRobot):
-    """A simulated robot whose 50th read raises what no backend should."""
-
-    reads = 0
-
-    def read(self):  # noqa: ANN201
-        self.reads += 1
-        if self.reads == 50:
-            raise RuntimeError("driver bug")
-        return super().read()
-
-
-def test_an_unexpected_error_still_stops_the_robot_then_is_raised(
-    hardware_problem, hardware_plan, tmp_path
-):
-    robot = _FailingRobot(hardware_problem.robot, start_rad=hardware_plan.position(0.0))
-    with pytest.raises(RuntimeError, match="driver bug"):
-        execute(hardware_plan, robot, hardware_problem, tmp_path / "run.csv")
-    table, header = read_log(tmp_path / "run.csv")
-    assert header["completed"] is False and header["reason"] == "RuntimeError: driver bug"
-    assert header["at_rest"] and table["phase"].iloc[-1] == "hold"
-    assert "stop" in set(table["phase"])

@@ -218,7 +218,7 @@ def test_three_holds_and_two_overrides_through_the_sdk_and_the_emulator(
         result = executor.run(hardware_plan, tmp_path / "run.csv")
         operator.join()
     table, header = read_log(tmp_path / "run.csv")
-    arrays = StateTrace.load(trace_path)
+    arrays = StateTrace.load(trace_path, header["clock_origin_s"])
     assert header["backend"]["backend"] == "dynamixel"
     assert_the_plan_was_completed(result, table, hardware_plan)
     assert_the_cut_stayed_on_the_plans_path(hardware_problem, hardware_plan, arrays, table)

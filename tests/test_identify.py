@@ -132,7 +132,9 @@ def excitation(problem: so.Problem, duration_s: float, seed: int) -> Trajectory:
             q[:, joint] += amplitude * np.sin(2 * np.pi * k * 0.08 * t + phase)
     q = q * window[:, None] + problem.waypoint_angles[0]
     qd = np.gradient(q, t, axis=0)
-    return Trajectory.from_samples(t, q, qd, np.gradient(qd, t, axis=0))
+    return Trajectory.from_samples(
+        t, q, qd, np.gradient(qd, t, axis=0), {"problem": problem.record()}
+    )
 
 
 @pytest.fixture(scope="module")

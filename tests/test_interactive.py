@@ -98,7 +98,7 @@ def test_keys_hold_resume_change_the_feed_and_stop(plan_file, tmp_path):
         terminal.type("+")
         at = terminal.wait_for(r"feed\s+90%.*running", at)
         terminal.type("q")
-        terminal.wait_for(r"safe stop \(at rest\): interrupted \(operator pressed q\)", at)
+        terminal.wait_for(r"safe stop: interrupted \(operator pressed q\); travel after", at)
     finally:
         status = terminal.close()
     assert status == 1

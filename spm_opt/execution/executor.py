@@ -1,22 +1,27 @@
 """The one executor: every plan reaches a device through here.
 
-Pre-flight, the evaluator measures the plan against the problem's limits and the robot's,
-and every limit that :mod:`spm_opt.limits` says judges the robot (joint range, speed,
-acceleration, jerk, torque, current, singularity) must hold; the cut's own figures (tool
-speed, distance from the contour, landmark visits, coverage) are the planner's business,
-not the robot's safety. The robot must be where the plan starts, or, on request, is first
-brought there by a jerk-limited ruckig approach. Then a fixed-rate loop on the backend's
+Pre-flight (:mod:`spm_opt.execution.preflight`), the plan must have been made for this
+problem, start and end at rest, and keep every limit that judges the robot. The robot must
+be where the plan starts, or, on request, is first brought there by a jerk-limited ruckig
+approach. A stop asked for from the first line of :meth:`Executor.run` on is honoured:
+before connecting, the run ends with nothing moved or written
+(:class:`~spm_opt.errors.RunInterrupted`); after, in the first control cycle, before any
+goal of the plan goes out. Then a fixed-rate loop on the backend's
 clock reads both actuators, checks them, writes the next goal positions and logs the
 sample. The goals follow the plan at the operator's feed (:mod:`spm_opt.execution.feed`):
 held, resumed and overridden from any thread, always on the planned path.
 On a hardware error, a following error beyond the tolerance, a run of cycles with a
-failed read or write longer than the retry budget, SIGINT or SIGTERM, the robot is brought
+failed read or write longer than the retry budget, SIGINT or SIGTERM, any other exception
+raised by the backend or in the loop, the robot is brought
 to rest by a jerk-limited ruckig stop that starts, in the cycle that saw the fault, from
 the last goal the actuators received (so the goal stream stays continuous: starting from
 the measured position would make the goal jump back by the following error, and a goal
 whose write failed never reached them). It then holds there until rest is proven: every
 sample over a window below the rest speed and each joint's position within a few encoder
 pulses. The log's header reports how long the stop took and how far each joint moved.
+A run is a success only when it completed and rest was proven at its end
+(:attr:`ExecutionResult.succeeded`). The log's times start at 0 at the loop's start; the
+header's ``clock_origin_s`` is that moment on the backend's clock.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import math
 import signal
 import threading
 import time
+import traceback
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -37,8 +43,8 @@ from typing import Any
 import numpy as np
 import ruckig
 
-from spm_opt.errors import CommunicationError, InputError, PreflightError
-from spm_opt.evaluate import evaluate
+from spm_opt.errors import CommunicationError, InputError, PreflightError, RunInterrupted
+from spm_opt.execution import preflight
 from spm_opt.execution.backend import (
     Backend,
     Clock,
@@ -47,7 +53,8 @@ from spm_opt.execution.backend import (
 )
 from spm_opt.execution.feed import FeedProfile, FeedRequests, JointLimits, Pace, feed_ceiling
 from spm_opt.execution.log import LogWriter
-from spm_opt.limits import ROBOT, RULES
+from spm_opt.execution.preflight import degrees
+from spm_opt.execution.realtime import frozen_heap
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import DEG
 from spm_opt.planners.ruckig import calculate_locally
@@ -103,6 +110,9 @@ class ExecutionSettings:
         :func:`~spm_opt.execution.feed.feed_ceiling`).
     max_hold_s : float, s
         Longest feed hold; a longer one ends in the safe stop.
+    other_problem : bool
+        Run a plan made for another problem, or one that records none, under this
+        problem's limits (see :mod:`spm_opt.execution.preflight`).
     """
 
     rate_hz: float = 100.0
@@ -122,6 +132,7 @@ class ExecutionSettings:
     feed: float = 1.0
     max_feed: float = 1.5
     max_hold_s: float = 600.0
+    other_problem: bool = False
 
     def __post_init__(self) -> None:
         checks = {
@@ -149,6 +160,9 @@ class ExecutionSettings:
         for name in ("communication_retries", "rest_position_pulses"):
             if not isinstance(getattr(self, name), int):
                 raise InputError(f"{name} = {getattr(self, name)!r}: expected an integer")
+        for name in ("approach", "other_problem"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"{name} = {getattr(self, name)!r}: expected true or false")
         if self.feed > self.max_feed:
             raise InputError(f"feed = {self.feed!r}: expected at most max_feed ({self.max_feed!r})")
         for name in ("settle_s", "hold_s"):
@@ -199,7 +213,7 @@ class LoopStatistics:
 
 @dataclass(frozen=True)
 class StopReport:
-    """How a safe stop went (SI; times on the backend's clock, the log's ``time_s``).
+    """How a safe stop went (SI; times on the log's clock, its ``time_s``).
 
     Attributes
     ----------
@@ -241,7 +255,7 @@ class RunStatus:
     Attributes
     ----------
     time_s : float, s
-        Since the run's first cycle.
+        The log's time (since the loop's start).
     phase : str
         "approach", "plan", "settle", "stop" or "hold" (after a stop).
     plan_time_s, plan_duration_s : float, s
@@ -273,9 +287,11 @@ class RunStatus:
 @dataclass
 class ExecutionResult:
     """How a run ended. ``completed`` is False when it ended in a safe stop; ``reason``
-    says why, in one line; ``stop`` says how the stop went; ``signals`` lists every SIGINT
-    and SIGTERM received, with the phase it arrived in; ``feed_events`` every hold, resume
-    and override, with its time (s, the log's clock) and plan time, as the header has them."""
+    says why, in one line (also when rest was not proven after a completed plan);
+    ``at_rest``: rest was proven at the end; ``stop`` says how the stop went; ``signals``
+    lists every SIGINT and SIGTERM received, with the phase it arrived in; ``feed_events``
+    every hold, resume and override, with its time (s, the log's clock) and plan time, as
+    the header has them."""
 
     completed: bool
     reason: str
@@ -288,36 +304,49 @@ class ExecutionResult:
     signals: list[str] = field(default_factory=list)
     feed_events: list[dict[str, Any]] = field(default_factory=list)
 
+    @property
+    def succeeded(self) -> bool:
+        """The plan ran to its end and rest was proven after it."""
+        return self.completed and self.at_rest
+
 
 class _Ticker:
-    """The loop's schedule: deadlines every period on the backend's clock; a late cycle
-    skips the deadlines it missed rather than running them in a burst."""
+    """The loop's schedule: deadlines every period on the backend's clock, from ``origin``
+    (its time now, s); a late cycle skips the deadlines it missed rather than running them
+    in a burst. Times it gives are since ``origin`` (the log's clock)."""
 
     def __init__(self, clock: Clock, period: float) -> None:
         self.clock, self.period = clock, period
+        self.origin = clock.now()
         self.ticks: list[float] = []
-        self._next = clock.now()
+        self._next = self.origin
 
     def wait(self) -> float:
         """Sleep until the next deadline; returns the time the cycle starts, s."""
         self.clock.sleep_until(self._next)
         now = self.clock.now()
-        self.ticks.append(now)
+        self.ticks.append(now - self.origin)
         missed = math.floor((now - self._next) / self.period)
         self._next += (max(missed, 0) + 1) * self.period
-        return now
+        return now - self.origin
+
+    def now(self) -> float:
+        """The time since ``origin``, s."""
+        return self.clock.now() - self.origin
 
 
 @dataclass
 class _Cycle:
     """One control cycle: when it began (s, the time its goal is sampled at), what it
-    read and what went wrong (``notes``)."""
+    read and what went wrong (``notes``; ``unexpected``: the backend raised something
+    other than :class:`CommunicationError`, a fault at once)."""
 
     time_s: float
     measurement: Measurement | None = None
     following_error: np.ndarray | None = None
     read_failed: bool = False
     write_failed: bool = False
+    unexpected: str = ""
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -424,7 +453,6 @@ class Executor:
         self._feed_events: list[dict[str, Any]] = []
         self._pace: Pace | None = None
         self._plan_duration = 0.0
-        self._first_cycle_s: float | None = None
         self.status: RunStatus | None = None
         """The run as it stands after the last cycle (None before the first)."""
 
@@ -452,23 +480,22 @@ class Executor:
         return self._requests.toggle_hold()
 
     def stop(self, why: str = "stop requested") -> None:
-        """End the run in the safe stop, as SIGINT does."""
+        """End the run in the safe stop, as SIGINT does; during pre-flight, end it before
+        anything moves (see :meth:`run`)."""
         self._stop_requested = self._stop_requested or why
 
     # ---------------------------------------------------------------- pre-flight
     def check_plan(self, trajectory: Trajectory) -> None:
-        """Refuse a plan that breaks a robot limit (one-line :class:`PreflightError`)."""
-        report = evaluate(self.problem, trajectory)
-        broken = [v for v in report.violations if RULES[v.rule].judges == ROBOT]
-        if broken:
-            raise PreflightError(
-                f"plan refused: {broken[0]}"
-                + (f" and {len(broken) - 1} more limit(s) broken" if len(broken) > 1 else "")
-            )
-        start = trajectory.position(trajectory.start_time)
-        low, high = self.problem.robot.joint_range[:, 0], self.problem.robot.joint_range[:, 1]
-        if np.any(start < low) or np.any(start > high):
-            raise PreflightError(f"plan refused: its start {_degrees(start)} is out of range")
+        """Refuse a plan this executor must not run (one-line :class:`PreflightError`;
+        see :mod:`spm_opt.execution.preflight`)."""
+        settings = self.settings
+        preflight.check_plan(
+            self.problem,
+            trajectory,
+            settings.joint_limits(self.problem),
+            1.0 / settings.rate_hz,
+            settings.other_problem,
+        )
 
     def _approach(self, measured: np.ndarray, start: np.ndarray) -> _Segment | None:
         distance = float(np.max(np.abs(measured - start)))
@@ -476,7 +503,7 @@ class Executor:
             return None
         if not self.settings.approach:
             raise PreflightError(
-                f"robot at {_degrees(measured)}, the plan starts at {_degrees(start)}: "
+                f"robot at {degrees(measured)}, the plan starts at {degrees(start)}: "
                 f"{distance / DEG:.3f} deg away (tolerance "
                 f"{self.settings.start_tolerance_rad / DEG:.3f} deg); ask for an approach move"
             )
@@ -494,22 +521,43 @@ class Executor:
         """Check the plan, connect, run it and log every sample to ``log_path`` (CSV).
 
         Raises :class:`PreflightError` before anything moves or is written when the plan
-        or the robot's position is refused; returns how the run ended otherwise.
+        or the robot's position is refused, and :class:`RunInterrupted` when a stop was
+        asked for (:meth:`stop`, SIGINT, SIGTERM) before connecting; returns how the run
+        ended otherwise. A stop asked for later is honoured by the loop's first cycle.
         """
-        self.check_plan(trajectory)
-        self._requests.ceiling = feed_ceiling(self.problem, trajectory, self.settings.max_feed)
-        log_path = Path(log_path)
-        if log_path.suffix != ".csv":
-            raise InputError(f"log {log_path}: expected a file name ending in .csv")
-        backend = self.backend
-        backend.connect()
-        try:
-            measured = backend.read()
-            start = trajectory.position(trajectory.start_time)
-            approach = self._approach(measured.position_rad, start)
-            return self._run_connected(trajectory, approach, measured, log_path, header or {})
-        finally:
-            backend.close()
+        self._stop_requested, self._signals_seen, self._phase = None, [], "pre-flight"
+        with self._signals():
+            self.check_plan(trajectory)
+            self._requests.ceiling = feed_ceiling(self.problem, trajectory, self.settings.max_feed)
+            if self.settings.feed > self._requests.ceiling:
+                _LOG.warning(
+                    "feed %.0f%% is above this plan's ceiling, %.0f%% (the highest at which "
+                    "it keeps its limits): it starts at %.0f%%",
+                    100 * self.settings.feed,
+                    100 * self._requests.ceiling,
+                    100 * self._requests.ceiling,
+                )
+            log_path = Path(log_path)
+            if log_path.suffix != ".csv":
+                raise InputError(f"log {log_path}: expected a file name ending in .csv")
+            if self._stop_requested:
+                raise RunInterrupted(
+                    f"stopped during pre-flight ({self._stop_requested}): nothing moved, "
+                    "nothing was written"
+                )
+            backend = self.backend
+            self._phase = "connect"
+            backend.connect()
+            try:
+                measured = backend.read()
+                start = trajectory.position(trajectory.start_time)
+                approach = self._approach(measured.position_rad, start)
+                with frozen_heap():
+                    return self._run_connected(
+                        trajectory, approach, measured, log_path, header or {}
+                    )
+            finally:
+                backend.close()
 
     def _run_connected(
         self,
@@ -520,61 +568,64 @@ class Executor:
         header: dict[str, Any],
     ) -> ExecutionResult:
         settings = self.settings
+        self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
         self._writer = LogWriter(
             log_path,
             {
                 **header,
                 "plan": trajectory.metadata,
                 "plan_duration_s": trajectory.duration,
-                "problem": self.problem.name,
+                "problem": self.problem.record(),
                 "backend": self.backend.describe(),
                 "settings": dataclasses.asdict(settings),
                 "feed_ceiling": self._requests.ceiling,
+                "clock_origin_s": self._ticker.origin,
                 "software_version": package_version(),
                 "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             },
             settings.flush_interval_s,
         )
-        self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
-        self._feed_events, self._pace, self._first_cycle_s = [], None, None
+        self._feed_events, self._pace = [], None
         self._plan_duration = trajectory.duration
         self._commanded = _Commanded(first.position_rad.copy(), np.zeros(2), np.zeros(2))
         self._last_measurement = first
         self._failed_cycles = self._reads_failed = self._writes_failed = 0
-        self._previous = (self._ticker.clock.now() - self._ticker.period, True)
-        reason, completed, at_rest, report = "", False, False, None
-        with self._signals():
-            try:
-                if approach is not None:
-                    self._follow("approach", approach)
-                self._follow_plan(trajectory)
-                end = trajectory.position(trajectory.end_time)
-                at_rest = self._settle(end)
-                reason, completed = "completed", True
-            except _Stop as stop:
-                reason = str(stop)
-                report = self._safe_stop(stop)
-            except Exception as error:  # a bug or a backend's surprise: stop, then raise
-                reason = f"{type(error).__name__}: {error}"
-                report = self._safe_stop(_Stop(reason))
-                raise
-            finally:
-                at_rest = report.at_rest if report is not None else at_rest
-                statistics = LoopStatistics.from_ticks(self._ticker.ticks, self._ticker.period)
-                backend_state = self.backend.describe()
-                self._writer.close(
-                    {
-                        "completed": completed,
-                        "reason": reason,
-                        "at_rest": at_rest,
-                        "stop": None if report is None else dataclasses.asdict(report),
-                        "signals": list(self._signals_seen),
-                        "feed_events": list(self._feed_events),
-                        "samples": self._writer.samples,
-                        "loop": dataclasses.asdict(statistics),
-                        "backend": backend_state,
-                    }
-                )
+        self._previous = (-self._ticker.period, True)
+        reason, completed, at_rest, report, exception = "", False, False, None, None
+        try:
+            if approach is not None:
+                self._follow("approach", approach)
+            self._follow_plan(trajectory)
+            end = trajectory.position(trajectory.end_time)
+            at_rest, why = self._settle(end)
+            completed = True
+            reason = "completed" if at_rest else f"completed, but rest {why}"
+        except _Stop as stop:
+            reason = str(stop)
+            report = self._safe_stop(stop)
+        except Exception as error:  # a bug in the loop: a fault like any other
+            reason = f"internal error: {type(error).__name__}: {error}"
+            exception = traceback.format_exception(error)
+            _LOG.debug("safe stop after an internal error", exc_info=True)
+            report = self._safe_stop(_Stop(reason))
+        finally:
+            at_rest = report.at_rest if report is not None else at_rest
+            statistics = LoopStatistics.from_ticks(self._ticker.ticks, self._ticker.period)
+            backend_state = self.backend.describe()
+            self._writer.close(
+                {
+                    "completed": completed,
+                    "reason": reason,
+                    "at_rest": at_rest,
+                    "stop": None if report is None else dataclasses.asdict(report),
+                    "signals": list(self._signals_seen),
+                    "feed_events": list(self._feed_events),
+                    "samples": self._writer.samples,
+                    "loop": dataclasses.asdict(statistics),
+                    "backend": backend_state,
+                    "exception": exception,
+                }
+            )
         return ExecutionResult(
             completed,
             reason,
@@ -654,19 +705,24 @@ class Executor:
             }
         )
 
-    def _settle(self, target: np.ndarray) -> bool:
+    def _settle(self, target: np.ndarray) -> tuple[bool, str]:
         """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;
-        True if confirmed."""
-        confirmed, _ = self._rest(
-            "settle", target, self.settings.settle_s, lambda c: self._check(c, target), True
+        (True, "confirmed") if confirmed, else (False, "not proven within …: why")."""
+        settle_s = self.settings.settle_s
+        confirmed, window = self._rest(
+            "settle", target, settle_s, lambda c: self._check(c, target), True
         )
-        return confirmed is not None
+        if confirmed is not None:
+            return True, "confirmed"
+        why = f"not proven within the {settle_s:g} s settle: {window.why()}"
+        _LOG.info("rest %s", why)
+        return False, why
 
     def _safe_stop(self, stop: _Stop) -> StopReport:
         """The jerk-limited stop from the last goal delivered, then the hold."""
-        _LOG.warning("safe stop: %s", stop)
+        _LOG.info("safe stop: %s", stop)
         self._phase = "stop"
-        seen = stop.cycle.time_s if stop.cycle is not None else self.backend.clock.now()
+        seen = stop.cycle.time_s if stop.cycle is not None else self._ticker.now()
         before = self._last_measurement
         reads, writes = self._reads_failed, self._writes_failed
         errors: list[str] = []
@@ -733,7 +789,7 @@ class Executor:
         if confirmed is not None:
             return True, "confirmed", confirmed
         why = f"not confirmed within the {hold_s:g} s hold: {window.why()}"
-        _LOG.warning("rest %s", why)
+        _LOG.info("rest %s", why)
         return False, why, None
 
     def _rest(
@@ -768,12 +824,22 @@ class Executor:
         try:
             cycle.measurement = self.backend.read()
             self._last_measurement = cycle.measurement
-        except CommunicationError as error:
-            _LOG.info("read failed: %s", error)
+        except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
             cycle.read_failed = True
-            cycle.notes.append(f"read failed: {error}")
             self._reads_failed += 1
+            cycle.notes.append(self._failure("read", error, cycle))
         return cycle
+
+    def _failure(self, what: str, error: Exception, cycle: _Cycle) -> str:
+        """The note of a read or write that raised: a :class:`CommunicationError` is a
+        failed transaction (counted against the retry budget); anything else is
+        unexpected, a fault at once."""
+        if isinstance(error, CommunicationError):
+            _LOG.info("%s failed: %s", what, error)
+            return f"{what} failed: {error}"
+        cycle.unexpected = f"the backend's {what} raised {type(error).__name__}: {error}"
+        _LOG.debug("%s raised", what, exc_info=True)
+        return cycle.unexpected
 
     def _send(
         self, cycle: _Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
@@ -784,11 +850,10 @@ class Executor:
         from the last goal known, is then the one that arrived to within q̈ T²."""
         try:
             self.backend.write_goal(position)
-        except CommunicationError as error:
-            _LOG.info("write failed: %s", error)
+        except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
             cycle.write_failed = True
-            cycle.notes.append(f"write failed: {error}")
             self._writes_failed += 1
+            cycle.notes.append(self._failure("write", error, cycle))
             return False
         commanded = self._commanded
         commanded.position, commanded.velocity = position, velocity
@@ -797,12 +862,15 @@ class Executor:
 
     def _end_cycle(self, phase: str, cycle: _Cycle, checked: bool) -> None:
         """Count the cycle (failed if its read or its write did) and log it; when
-        ``checked``, a run of failures past the retry budget is a fault seen here."""
+        ``checked``, a run of failures past the retry budget, or a write that raised the
+        unexpected, is a fault seen here."""
         failed = cycle.read_failed or cycle.write_failed
         self._failed_cycles = self._failed_cycles + 1 if failed else 0
         self._previous = (cycle.time_s, not cycle.write_failed)
         reason = ""
-        if checked and self._failed_cycles > self.settings.communication_retries:
+        if checked and cycle.unexpected:
+            reason = cycle.unexpected
+        elif checked and self._failed_cycles > self.settings.communication_retries:
             reason = self._communication_lost(self._failed_cycles, cycle)
             cycle.notes.append(reason)
         self._log(phase, cycle)
@@ -814,12 +882,15 @@ class Executor:
         included), a hardware error or a following error; the reason joins the notes."""
         reason = self._fault(cycle, expected)
         if reason:
-            cycle.notes.append(reason)
+            if reason not in cycle.notes:
+                cycle.notes.append(reason)
             raise _Stop(reason, cycle)
 
     def _fault(self, cycle: _Cycle, expected: np.ndarray) -> str:
         if self._stop_requested:
             return f"interrupted ({self._stop_requested})"
+        if cycle.unexpected:
+            return cycle.unexpected
         failures = self._failed_cycles + 1 if cycle.read_failed else 0
         if failures > self.settings.communication_retries:
             return self._communication_lost(failures, cycle)
@@ -881,14 +952,12 @@ class Executor:
     def _update_status(self, phase: str, cycle: _Cycle, torque: np.ndarray | None) -> None:
         """Replace :attr:`status` (one assignment: a reader in another thread sees the old
         status or the new one, whole)."""
-        if self._first_cycle_s is None:
-            self._first_cycle_s = cycle.time_s
         pace, (_, held) = self._pace, self._requests.requested()
         if pace is None:  # outside the plan phase the goal is not on the plan's clock
             pace = Pace(self.status.plan_time_s if self.status else 0.0, 0.0, 0.0, 0.0)
         error = cycle.following_error
         self.status = RunStatus(
-            time_s=cycle.time_s - self._first_cycle_s,
+            time_s=cycle.time_s,
             phase=phase,
             plan_time_s=pace.plan_time_s,
             plan_duration_s=self._plan_duration,
@@ -932,11 +1001,9 @@ class Executor:
 
     @contextmanager
     def _signals(self) -> Iterator[None]:
-        """SIGINT and SIGTERM ask for a safe stop (in the main thread only); each one is
+        """SIGINT and SIGTERM ask for a stop (in the main thread only); each one is
         recorded with the phase it arrived in, also during the stop and the hold, which
         go on."""
-        self._stop_requested = None
-        self._signals_seen = []
         if threading.current_thread() is not threading.main_thread():
             yield
             return
@@ -998,10 +1065,6 @@ def _travel(before: Measurement | None, after: Measurement | None) -> list[float
     if before is None or after is None:
         return None
     return [float(d) for d in np.abs(after.position_rad - before.position_rad)]
-
-
-def _degrees(q: np.ndarray) -> str:
-    return "(" + ", ".join(f"{v / DEG:.3f}" for v in q) + ") deg"
 
 
 def execute(

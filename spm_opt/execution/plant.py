@@ -125,12 +125,14 @@ class StateTrace:
             (time_s, q[0], q[1], v[0], v[1], goal[0], goal[1], current[0], current[1])
         )
 
-    def arrays(self) -> dict[str, np.ndarray]:
+    def arrays(self, origin_s: float = 0.0) -> dict[str, np.ndarray]:
         """``time_s`` (n,) and ``position_rad``, ``velocity_rad_s``, ``goal_rad`` and
-        ``current_a`` (the motor currents, before the sensor's noise and rounding) (n, 2)."""
+        ``current_a`` (the motor currents, before the sensor's noise and rounding) (n, 2).
+        ``origin_s`` (s) is subtracted from the times: an execution log's
+        ``clock_origin_s`` puts them on the log's clock."""
         table = np.array(self._rows, dtype=float).reshape(-1, 9)
         return {
-            "time_s": table[:, 0],
+            "time_s": table[:, 0] - origin_s,
             "position_rad": table[:, 1:3],
             "velocity_rad_s": table[:, 3:5],
             "goal_rad": table[:, 5:7],
@@ -143,10 +145,13 @@ class StateTrace:
             np.savez(file, **self.arrays())
 
     @staticmethod
-    def load(path: str | Path) -> dict[str, np.ndarray]:
-        """The arrays a :meth:`save` wrote."""
+    def load(path: str | Path, origin_s: float = 0.0) -> dict[str, np.ndarray]:
+        """The arrays a :meth:`save` wrote, their times less ``origin_s`` (s; see
+        :meth:`arrays`)."""
         with np.load(path) as data:
-            return {name: data[name] for name in StateTrace.FIELDS}
+            arrays = {name: data[name] for name in StateTrace.FIELDS}
+        arrays["time_s"] = arrays["time_s"] - origin_s
+        return arrays
 
 
 class DynamixelPlant:
