@@ -243,19 +243,21 @@ def assert_the_plant_came_to_rest(
 
 
 # ------------------------------------------------------------------- on the wire
-def _run_on_the_wire(problem, trajectory, faults, tmp_path):
+def run_on_the_wire(problem, trajectory, faults, tmp_path, backend_class=DynamixelRobot):
+    """Run ``trajectory`` through the SDK against the emulator with ``faults``: the result,
+    the log, its header and the plant's true trace on the log's clock."""
     trace_path = tmp_path / "plant.npz"
     with spawn_emulator(
         problem_file=HARDWARE_PROBLEM, faults=faults, trace_path=trace_path
     ) as emulator:
-        backend = DynamixelRobot(problem.robot.actuator, emulator.device)
+        backend = backend_class(problem.robot.actuator, emulator.device)
         result = execute(trajectory, backend, problem, tmp_path / "run.csv", SETTINGS)
     table, header = read_log(tmp_path / "run.csv")
     return result, table, header, StateTrace.load(trace_path, header["clock_origin_s"])
 
 
 def test_the_move_completes_through_the_sdk_and_the_emulator(hardware_problem, move, tmp_path):
-    result, table, header, trace = _run_on_the_wire(hardware_problem, move, Faults(), tmp_path)
+    result, table, header, trace = run_on_the_wire(hardware_problem, move, Faults(), tmp_path)
     assert result.completed and result.at_rest and header["stop"] is None
     assert header["backend"]["backend"] == "dynamixel"
     # the log starts at 0; its origin on the monotonic clock is in the header
@@ -300,7 +302,7 @@ WIRE_FAULTS = [
 def test_a_wire_fault_ends_in_a_stop_the_true_state_confirms(
     hardware_problem, move, tmp_path, faults, reason
 ):
-    result, table, header, trace = _run_on_the_wire(hardware_problem, move, faults, tmp_path)
+    result, table, header, trace = run_on_the_wire(hardware_problem, move, faults, tmp_path)
     assert result.reason.startswith(reason), result.reason
     bound = stop_bound(hardware_problem, move)
     assert_every_sample_up_to_the_fault(table, header, result, FAULT_AT_S)
@@ -316,7 +318,7 @@ def test_refused_writes_stop_from_the_last_goal_the_actuators_received(
     """The line refuses every packet for 0.3 s: the SDK's writes fail at the port, count
     against the retry budget, and the stop starts from the goal the plant really holds."""
     faults = Faults(write=RefusedWrites(at=FAULT_AT_S, seconds=0.3))
-    result, table, header, trace = _run_on_the_wire(hardware_problem, move, faults, tmp_path)
+    result, table, header, trace = run_on_the_wire(hardware_problem, move, faults, tmp_path)
     assert result.reason.startswith("communication lost"), result.reason
     bound = stop_bound(hardware_problem, move)
     assert_every_sample_up_to_the_fault(table, header, result, FAULT_AT_S)

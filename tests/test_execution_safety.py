@@ -38,6 +38,8 @@ from test_execution_faults import (
     SETTINGS,
     ScriptedRobot,
     assert_the_commanded_stop_kept_its_limits,
+    run_on_the_wire,
+    short_move,
     stop_bound,
 )
 from test_interactive import Terminal
@@ -46,8 +48,7 @@ import spm_opt as so
 from spm_opt.errors import PreflightError, RunInterrupted
 from spm_opt.execution import Executor, SimulatedRobot, execute, preflight, read_log
 from spm_opt.execution.dynamixel import DynamixelRobot
-from spm_opt.execution.emulator import DelayReplies, Faults, Overload, spawn_emulator
-from spm_opt.execution.plant import StateTrace
+from spm_opt.execution.emulator import DelayReplies, Faults, Overload
 
 DEG = np.pi / 180.0
 POSITIONS = ["position_theta1_rad", "position_theta2_rad"]
@@ -63,6 +64,11 @@ def window(plan: so.Trajectory, start_s: float, end_s: float, problem: so.Proble
         plan.acceleration(t),
         {"planner": "window", "problem": problem.record()},
     )
+
+
+@pytest.fixture(scope="module")
+def move(hardware_problem: so.Problem) -> so.Trajectory:
+    return short_move(hardware_problem)
 
 
 def true_rest_at_the_end(robot: SimulatedRobot) -> None:
@@ -265,27 +271,25 @@ def test_a_stop_during_pre_flight_ends_the_run_before_anything_moves(
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
-class _StopAtConnect:
-    """Mixed into a backend: the operator asks for a stop while it connects."""
-
-    executor: Executor
+class _InterruptedAtConnect:
+    """Mixed into a backend: SIGINT arrives while it connects."""
 
     def connect(self) -> None:
         super().connect()  # type: ignore[misc]
-        self.executor.stop("operator pressed q")
+        os.kill(os.getpid(), signal.SIGINT)
 
 
-class _SimulatedStopAtConnect(_StopAtConnect, SimulatedRobot):
+class _SimulatedInterruptedAtConnect(_InterruptedAtConnect, SimulatedRobot):
     pass
 
 
-class _DynamixelStopAtConnect(_StopAtConnect, DynamixelRobot):
+class _DynamixelInterruptedAtConnect(_InterruptedAtConnect, DynamixelRobot):
     pass
 
 
 def _assert_stopped_in_the_first_cycle(result, table, trace, start) -> None:
     """No goal of the plan went out: every goal is the start, the plant never moved."""
-    assert result.reason == "interrupted (operator pressed q)", result.reason
+    assert result.reason == "interrupted (SIGINT)", result.reason
     assert set(table["phase"]) == {"stop", "hold"}  # the first cycle saw it and stopped
     assert result.at_rest and result.stop.stop_delivered
     goals = table[GOALS].to_numpy()
@@ -297,9 +301,8 @@ def test_a_stop_while_connecting_is_honoured_by_the_first_cycle(
     hardware_problem, hardware_plan, tmp_path
 ):
     start = hardware_plan.position(0.0)
-    robot = _SimulatedStopAtConnect(hardware_problem.robot, start_rad=start)
-    robot.executor = Executor(hardware_problem, robot)
-    result = robot.executor.run(hardware_plan, tmp_path / "run.csv")
+    robot = _SimulatedInterruptedAtConnect(hardware_problem.robot, start_rad=start)
+    result = execute(hardware_plan, robot, hardware_problem, tmp_path / "run.csv")
     table, _ = read_log(tmp_path / "run.csv")
     _assert_stopped_in_the_first_cycle(result, table, robot.trace.arrays(), start)
 
@@ -308,13 +311,9 @@ def test_a_stop_while_connecting_is_honoured_by_the_first_cycle(
 def test_a_stop_while_connecting_is_honoured_through_the_sdk(
     hardware_problem, hardware_plan, tmp_path
 ):
-    trace_path = tmp_path / "plant.npz"
-    with spawn_emulator(problem_file=HARDWARE_PROBLEM, trace_path=trace_path) as emulator:
-        backend = _DynamixelStopAtConnect(hardware_problem.robot.actuator, emulator.device)
-        backend.executor = Executor(hardware_problem, backend)
-        result = backend.executor.run(hardware_plan, tmp_path / "run.csv")
-    table, header = read_log(tmp_path / "run.csv")
-    trace = StateTrace.load(trace_path, header["clock_origin_s"])
+    result, table, _, trace = run_on_the_wire(
+        hardware_problem, hardware_plan, Faults(), tmp_path, _DynamixelInterruptedAtConnect
+    )
     _assert_stopped_in_the_first_cycle(result, table, trace, hardware_plan.position(0.0))
 
 
@@ -452,12 +451,9 @@ class _SurprisingDynamixel(DynamixelRobot):
 def test_an_unexpected_backend_error_through_the_sdk_still_stops_the_plant(
     hardware_problem, move, tmp_path
 ):
-    trace_path = tmp_path / "plant.npz"
-    with spawn_emulator(problem_file=HARDWARE_PROBLEM, trace_path=trace_path) as emulator:
-        backend = _SurprisingDynamixel(hardware_problem.robot.actuator, emulator.device)
-        result = execute(move, backend, hardware_problem, tmp_path / "run.csv", SETTINGS)
-    table, header = read_log(tmp_path / "run.csv")
-    trace = StateTrace.load(trace_path, header["clock_origin_s"])
+    result, table, header, trace = run_on_the_wire(
+        hardware_problem, move, Faults(), tmp_path, _SurprisingDynamixel
+    )
     assert result.reason == "the backend's read raised ValueError: read buffer garbled"
     assert header["stop"]["stop_delivered"]
     assert_the_commanded_stop_kept_its_limits(
@@ -465,13 +461,6 @@ def test_an_unexpected_backend_error_through_the_sdk_still_stops_the_plant(
     )
     last = trace["time_s"] >= trace["time_s"][-1] - SETTINGS.rest_window_s
     assert np.all(np.abs(trace["velocity_rad_s"][last]) < SETTINGS.rest_speed_rad_s)
-
-
-@pytest.fixture(scope="module")
-def move(hardware_problem):  # noqa: ANN201
-    from test_execution_faults import short_move
-
-    return short_move(hardware_problem)
 
 
 # ------------------------------------------------------------ 5. rest proven, or failure
@@ -507,17 +496,6 @@ def test_an_unproven_rest_is_exit_status_1_with_one_line(plan_csv, tmp_path, cap
 
 
 # ------------------------------------------------------------------ 6. no stale replies
-def _run_on_the_wire(problem, plan, faults, tmp_path):
-    trace_path = tmp_path / "plant.npz"
-    with spawn_emulator(
-        problem_file=HARDWARE_PROBLEM, faults=faults, trace_path=trace_path
-    ) as emulator:
-        backend = DynamixelRobot(problem.robot.actuator, emulator.device)
-        result = execute(plan, backend, problem, tmp_path / "run.csv", SETTINGS)
-    table, header = read_log(tmp_path / "run.csv")
-    return result, table, header, StateTrace.load(trace_path, header["clock_origin_s"])
-
-
 def _staleness(table, trace) -> np.ndarray:
     """For each reading logged "ok": how far it is from the plant's true position when the
     cycle read it (the true state sampled next after the cycle began), rad."""
@@ -534,7 +512,7 @@ def test_replies_50_ms_late_are_never_taken_for_fresh_ones(
     """The emulator delays 30 replies by 50 ms from 1 s on, during the 16 s plan (joint
     speeds up to 0.17 rad/s: 50 ms stale is up to 0.5 deg)."""
     faults = Faults(delay=DelayReplies(seconds=0.05, at=FAULT_AT_S, count=30))
-    result, table, header, trace = _run_on_the_wire(
+    result, table, header, trace = run_on_the_wire(
         hardware_problem, hardware_plan, faults, tmp_path
     )
     # a fresh reading: the encoder's resolution, the sag, and the plant moving while the
@@ -554,7 +532,7 @@ def test_a_late_reply_during_the_stop_is_no_hardware_error(hardware_problem, mov
         overload=(Overload(id=1, at=FAULT_AT_S),),
         delay=DelayReplies(seconds=0.05, at=FAULT_AT_S - 0.05, count=30),
     )
-    result, table, header, trace = _run_on_the_wire(hardware_problem, move, faults, tmp_path)
+    result, table, header, trace = run_on_the_wire(hardware_problem, move, faults, tmp_path)
     assert not result.completed
     errors = table[["hardware_error_1", "hardware_error_2"]].dropna().to_numpy()
     assert set(np.unique(errors)) <= {0, 32}, np.unique(errors)
