@@ -496,13 +496,24 @@ def test_an_unproven_rest_is_exit_status_1_with_one_line(plan_csv, tmp_path, cap
 
 
 # ------------------------------------------------------------------ 6. no stale replies
+READ_WINDOW_S = 0.02
+"""A reading is fresh when the plant was there at some moment from its cycle's start to
+this much later (a read takes about a millisecond; the rest is room for a loaded machine)."""
+
+
 def _staleness(table, trace) -> np.ndarray:
-    """For each reading logged "ok": how far it is from the plant's true position when the
-    cycle read it (the true state sampled next after the cycle began), rad."""
+    """For each reading logged "ok": how far it is from every true position the plant held
+    from its cycle's start to ``READ_WINDOW_S`` later, at the nearest, rad."""
     ok = (table["status"] == "ok").to_numpy()
-    times = table["time_s"].to_numpy()[ok]
-    rows = np.minimum(np.searchsorted(trace["time_s"], times), len(trace["time_s"]) - 1)
-    return np.max(np.abs(table[POSITIONS].to_numpy()[ok] - trace["position_rad"][rows]), axis=1)
+    times, measured = table["time_s"].to_numpy()[ok], table[POSITIONS].to_numpy()[ok]
+    first = np.searchsorted(trace["time_s"], times)
+    last = np.searchsorted(trace["time_s"], times + READ_WINDOW_S, side="right")
+    return np.array(
+        [
+            np.min(np.max(np.abs(trace["position_rad"][a:b] - q), axis=1))
+            for a, b, q in zip(first, np.maximum(last, first + 1), measured, strict=True)
+        ]
+    )
 
 
 @pytest.mark.slow
@@ -515,9 +526,8 @@ def test_replies_50_ms_late_are_never_taken_for_fresh_ones(
     result, table, header, trace = run_on_the_wire(
         hardware_problem, hardware_plan, faults, tmp_path
     )
-    # a fresh reading: the encoder's resolution, the sag, and the plant moving while the
-    # reply is made (2 ms at 0.17 rad/s)
-    assert np.max(_staleness(table, trace)) < 0.05 * DEG + 0.17 * 0.002
+    # fresh: within the encoder's resolution and the sag of the plant's true position
+    assert np.max(_staleness(table, trace)) < 0.05 * DEG
     assert header["backend"]["stale_replies"] > 0
     assert result.at_rest, result.reason
 
@@ -537,7 +547,7 @@ def test_a_late_reply_during_the_stop_is_no_hardware_error(hardware_problem, mov
     errors = table[["hardware_error_1", "hardware_error_2"]].dropna().to_numpy()
     assert set(np.unique(errors)) <= {0, 32}, np.unique(errors)
     assert header["stop"]["hardware_errors"] == ["actuator 1: overload"]
-    assert np.max(_staleness(table, trace)) < 0.05 * DEG + 0.1 * 0.002
+    assert np.max(_staleness(table, trace)) < 0.05 * DEG
 
 
 # ------------------------------------------------------------- 7. what the user is told
@@ -565,9 +575,10 @@ def test_a_real_time_log_starts_at_0_with_the_clocks_origin_in_the_header(
     table, header = read_log(tmp_path / "run.csv")
     assert 0.0 <= table["time_s"].iloc[0] < PERIOD_S
     assert before < header["clock_origin_s"] < before + 5.0
-    # each cycle's reading is sampled just after the cycle began, on the log's clock
-    lag = robot.trace.arrays(header["clock_origin_s"])["time_s"][1:] - table["time_s"]
-    assert np.all((lag >= 0.0) & (lag < PERIOD_S / 2)), lag
+    # on the log's clock, each cycle's reading falls between its start and the next's
+    read_at = robot.trace.arrays(header["clock_origin_s"])["time_s"][1:]
+    begins = table["time_s"].to_numpy()
+    assert np.all(read_at >= begins) and np.all(read_at[:-1] < begins[1:])
 
 
 def test_the_log_headers_problem_and_clock_survive_json(hardware_problem, move, tmp_path):
