@@ -11,6 +11,7 @@ import ruckig
 import spm_opt as so
 from spm_opt.model.params import MM
 from spm_opt.planners import ruckig as ruckig_planner
+from spm_opt.ruckig_local import calculate_locally
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 NAMES = ("craniotomy_bone_flap", "craniotomy_large_flap", "craniotomy_five_landmarks")
@@ -81,7 +82,7 @@ def test_cubic_pieces_reproduce_ruckigs_profile_exactly():
     inp.current_position, inp.target_position = [0.1, -0.2], [0.4, 0.05]
     inp.current_velocity, inp.target_velocity = [0.02, 0.0], [0.0, 0.03]
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = [0.1, 0.08], [1.0, 1.0], [10.0, 10.0]
-    profile = ruckig_planner.calculate_locally(inp, "test segment")
+    profile = calculate_locally(inp, "test segment")
     pieces = ruckig_planner.cubic_pieces(profile)
     t = np.linspace(0.0, profile.duration, 997)
     expected = np.array([profile.at_time(x) for x in t])  # (N, 3, 2)
@@ -163,7 +164,7 @@ def test_guard_refuses_intermediate_positions(spy):
     inp = ruckig.InputParameter(2)
     inp.target_position, inp.intermediate_positions = [0.1, 0.1], [[0.05, 0.0]]
     with pytest.raises(so.PlanningError, match="segment 3: refusing 1 intermediate positions"):
-        ruckig_planner.calculate_locally(inp, "segment 3")
+        calculate_locally(inp, "segment 3")
     assert spy.made == [] and spy.calls == []
 
 
@@ -171,7 +172,7 @@ def test_ruckig_errors_name_the_segment():
     inp = ruckig.InputParameter(2)
     inp.target_position, inp.max_velocity = [0.1, 0.1], [-1.0, 1.0]
     with pytest.raises(so.PlanningError, match=r"^ruckig: segment 2 \(A2 -> A3\): \[ruckig\]"):
-        ruckig_planner.calculate_locally(inp, "segment 2 (A2 -> A3)")
+        calculate_locally(inp, "segment 2 (A2 -> A3)")
 
 
 def test_a_failed_result_is_a_planning_error_in_words(paper_problem, monkeypatch):

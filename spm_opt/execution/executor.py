@@ -57,8 +57,8 @@ from spm_opt.execution.preflight import degrees
 from spm_opt.execution.realtime import frozen_heap
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import DEG
-from spm_opt.planners.ruckig import calculate_locally
 from spm_opt.problem import Problem
+from spm_opt.ruckig_local import calculate_locally
 from spm_opt.trajectory import Trajectory, package_version
 
 _LOG = logging.getLogger(__name__)

@@ -39,8 +39,8 @@ import ruckig
 from spm_opt.errors import InputError
 from spm_opt.evaluate import evaluate
 from spm_opt.limits import RULES
-from spm_opt.planners.ruckig import calculate_locally
 from spm_opt.problem import Problem
+from spm_opt.ruckig_local import calculate_locally
 from spm_opt.trajectory import Trajectory
 
 HEADROOM = 0.98

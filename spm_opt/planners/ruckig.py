@@ -64,6 +64,7 @@ from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
+from spm_opt.ruckig_local import calculate_locally
 from spm_opt.trajectory import Trajectory
 
 VIA_POINTS = ("stop", "pass-through")
@@ -80,14 +81,6 @@ TORQUE_STEP = 0.8
 torque exceeds its limit (ruckig knows no dynamics)."""
 MIN_PIECE_S = 1e-9
 """Switch times closer than this, s, are merged (their jerk is averaged, within limits)."""
-
-_RESULT_WORDS = {
-    ruckig.Result.Error: "failed (unspecified error)",
-    ruckig.Result.ErrorInvalidInput: "refused the input as invalid",
-    ruckig.Result.ErrorPositionalLimits: "found the motion leaves the position limits",
-    ruckig.Result.ErrorExecutionTimeCalculation: "found no time-optimal profile",
-    ruckig.Result.ErrorSynchronizationCalculation: "could not synchronise the joints",
-}
 
 
 @dataclass(frozen=True)
@@ -118,35 +111,6 @@ class RuckigSettings:
 
 
 OPTION_KEYS = tuple(f.name for f in dataclasses.fields(RuckigSettings))
-
-
-def calculate_locally(inp: ruckig.InputParameter, segment: str) -> ruckig.Trajectory:
-    """The one call into ruckig: one segment, without intermediate waypoints, on this machine.
-
-    Raises
-    ------
-    PlanningError
-        If ``inp`` carries intermediate positions (ruckig would send them to its remote
-        service), or ruckig fails; the message names ``segment`` and ruckig's result.
-    """
-    if len(inp.intermediate_positions) > 0:
-        raise PlanningError(
-            f"ruckig: {segment}: refusing {len(inp.intermediate_positions)} intermediate "
-            "positions (ruckig would plan them on a remote service); chain single segments"
-        )
-    generator = ruckig.Ruckig(inp.degrees_of_freedom)
-    trajectory = ruckig.Trajectory(inp.degrees_of_freedom)
-    try:
-        result = generator.calculate(inp, trajectory)
-    except ruckig.RuckigError as error:
-        reason = next((line for line in str(error).splitlines() if line.strip()), "no message")
-        raise PlanningError(f"ruckig: {segment}: {reason.strip()}") from None
-    except ValueError as error:  # a result code its Python binding does not know
-        raise PlanningError(f"ruckig: {segment}: ruckig failed ({error})") from None
-    if result not in (ruckig.Result.Working, ruckig.Result.Finished):
-        words = _RESULT_WORDS.get(result, f"returned {result}")
-        raise PlanningError(f"ruckig: {segment}: ruckig {words} ({result.name})")
-    return trajectory
 
 
 def stop_speed(distance: np.ndarray, acceleration: float, jerk: float) -> np.ndarray:
