@@ -29,7 +29,7 @@ CYCLES = 200
 
 def profile(problem: so.Problem, plan: so.Trajectory) -> FeedProfile:
     settings = ExecutionSettings()
-    return FeedProfile(plan, settings.joint_limits(problem), 1.0, 1.0, 0.5 / settings.rate_hz)
+    return FeedProfile(plan, settings.joint_limits(problem), 1.0, 0.5 / settings.rate_hz)
 
 
 def per_cycle(repeats: int, work) -> float:

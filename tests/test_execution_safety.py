@@ -271,6 +271,19 @@ def test_a_stop_during_pre_flight_ends_the_run_before_anything_moves(
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+def test_a_stop_asked_for_before_run_counts_and_is_forgotten_after_it(
+    hardware_problem, hardware_plan, tmp_path
+):
+    """The console starts before ``run()``: a ``q`` typed then ends the run; the next run
+    of the same executor starts clean."""
+    robot = SimulatedRobot(hardware_problem.robot, start_rad=hardware_plan.position(0.0))
+    executor = Executor(hardware_problem, robot)
+    executor.stop("operator pressed q")
+    with pytest.raises(RunInterrupted, match="operator pressed q"):
+        executor.run(hardware_plan, tmp_path / "run.csv")
+    assert executor.run(hardware_plan, tmp_path / "run.csv").succeeded
+
+
 class _InterruptedAtConnect:
     """Mixed into a backend: SIGINT arrives while it connects."""
 

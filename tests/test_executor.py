@@ -19,8 +19,8 @@ from test_execution_faults import assert_the_commanded_stop_kept_its_limits, sto
 import spm_opt as so
 from spm_opt.errors import PreflightError
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_log
-from spm_opt.execution.executor import LoopStatistics
 from spm_opt.execution.log import COLUMNS
+from spm_opt.execution.results import LoopStatistics
 
 DEG = np.pi / 180.0
 

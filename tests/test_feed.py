@@ -301,7 +301,7 @@ def run_profile(plan: so.Trajectory, problem: so.Problem, script, rate_hz: float
     """Drive a :class:`FeedProfile` at ``rate_hz`` through ``script`` [(time s, target)];
     returns the times, the paces and the goals (position, rate, acceleration)."""
     limits = SETTINGS.joint_limits(problem)
-    profile = FeedProfile(plan, limits, 1.0, script[0][1], 0.5 / rate_hz)
+    profile = FeedProfile(plan, limits, script[0][1], 0.5 / rate_hz)
     times, paces, goals = [], [], []
     target, pending = script[0][1], list(script[1:])
     for k in range(int(10 * plan.duration * rate_hz)):

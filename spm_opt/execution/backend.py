@@ -17,6 +17,7 @@ import numpy as np
 from spm_opt.errors import CommunicationError
 
 __all__ = [
+    "CLOCK_EPSILON_S",
     "HARDWARE_ERROR_BITS",
     "Backend",
     "Clock",
@@ -62,6 +63,10 @@ class Measurement:
     velocity_rad_s: np.ndarray
     current_a: np.ndarray
     hardware_error: tuple[int, int] = (0, 0)
+
+
+CLOCK_EPSILON_S = 1e-9
+"""Rounding of the loop's clock, s: a time this close to a boundary counts as on it."""
 
 
 @runtime_checkable

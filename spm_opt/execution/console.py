@@ -22,8 +22,9 @@ from typing import TextIO
 
 import numpy as np
 
-from spm_opt.execution.executor import Executor, RunStatus
+from spm_opt.execution.executor import Executor
 from spm_opt.execution.feed import FEED_STEP
+from spm_opt.execution.results import RunStatus
 from spm_opt.model import kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem

@@ -3,8 +3,8 @@
 Pre-flight (:mod:`spm_opt.execution.preflight`), the plan must have been made for this
 problem, start and end at rest, and keep every limit that judges the robot. The robot must
 be where the plan starts, or, on request, is first brought there by a jerk-limited ruckig
-approach. A stop asked for from the first line of :meth:`Executor.run` on is honoured:
-before connecting, the run ends with nothing moved or written
+approach. A stop asked for before or during :meth:`Executor.run` is honoured (and
+forgotten when the run ends): before connecting, the run ends with nothing moved or written
 (:class:`~spm_opt.errors.RunInterrupted`); after, in the first control cycle, before any
 goal of the plan goes out. Then a fixed-rate loop on the backend's
 clock reads both actuators, checks them, writes the next goal positions and logs the
@@ -33,7 +33,6 @@ import signal
 import threading
 import time
 import traceback
-from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -46,268 +45,25 @@ import ruckig
 from spm_opt.errors import CommunicationError, InputError, PreflightError, RunInterrupted
 from spm_opt.execution import preflight
 from spm_opt.execution.backend import (
+    CLOCK_EPSILON_S,
     Backend,
     Clock,
     Measurement,
     hardware_error_names,
 )
-from spm_opt.execution.feed import FeedProfile, FeedRequests, JointLimits, Pace, feed_ceiling
+from spm_opt.execution.feed import FeedProfile, FeedRequests, Pace, feed_ceiling
 from spm_opt.execution.log import LogWriter
 from spm_opt.execution.preflight import degrees
 from spm_opt.execution.realtime import frozen_heap
-from spm_opt.model.actuator import Actuator
+from spm_opt.execution.rest import FeedHoldWatch, RestWindow
+from spm_opt.execution.results import ExecutionResult, LoopStatistics, RunStatus, StopReport
+from spm_opt.execution.settings import ExecutionSettings
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
 from spm_opt.ruckig_local import calculate_locally
 from spm_opt.trajectory import Trajectory, package_version
 
 _LOG = logging.getLogger(__name__)
-
-_CLOCK_EPSILON_S = 1e-9
-"""Rounding of the loop's clock, s: a time this close to a boundary counts as on it."""
-
-
-@dataclass(frozen=True)
-class ExecutionSettings:
-    """How the executor runs a plan (SI).
-
-    Attributes
-    ----------
-    rate_hz : float, Hz
-        Control loop rate.
-    start_tolerance_rad : float, rad
-        Largest distance of the robot from the plan's start at which the plan may begin.
-    approach : bool
-        Move to the plan's start first (a ruckig move from rest to rest) when farther.
-    approach_speed_rad_s : float, rad/s
-        Speed limit of the approach move.
-    following_error_rad : float, rad
-        Largest distance between the planned and the measured position of a joint.
-    communication_retries : int
-        Consecutive control cycles with a failed read or a failed write tolerated before
-        the run stops.
-    stop_acceleration_rad_s2, stop_jerk_rad_s3 : float
-        Limits of the stop and of the approach (defaults when the problem has none).
-    settle_s : float, s
-        After the plan's end, longest time allowed for the joints to come to rest.
-    rest_speed_rad_s : float, rad/s
-        Measured joint speed below which a sample counts as at rest.
-    rest_window_s : float, s
-        Rest is confirmed by samples covering this long, every one slower than
-        ``rest_speed_rad_s``, over which each joint's measured position spans fewer than
-        ``rest_position_pulses`` encoder pulses.
-    rest_position_pulses : int
-        See ``rest_window_s`` (pulses of the actuator's encoder: 5 of the L54's 361,384
-        per revolution are 0.005°).
-    hold_s : float, s
-        After a stop, longest time spent holding to confirm rest.
-    flush_interval_s : float, s
-        Longest time a sample waits before it is written to the log.
-    feed : float
-        The feed override the plan starts at, a fraction of its planned pace.
-    max_feed : float
-        Highest override allowed, if every limit allows it (see
-        :func:`~spm_opt.execution.feed.feed_ceiling`).
-    max_hold_s : float, s
-        Longest feed hold; a longer one ends in the safe stop.
-    other_problem : bool
-        Run a plan made for another problem, or one that records none, under this
-        problem's limits (see :mod:`spm_opt.execution.preflight`).
-    """
-
-    rate_hz: float = 100.0
-    start_tolerance_rad: float = 0.25 * DEG
-    approach: bool = False
-    approach_speed_rad_s: float = 0.1
-    following_error_rad: float = 1.0 * DEG
-    communication_retries: int = 3
-    stop_acceleration_rad_s2: float = 1.0
-    stop_jerk_rad_s3: float = 10.0
-    settle_s: float = 1.0
-    rest_speed_rad_s: float = 0.005
-    rest_window_s: float = 0.2
-    rest_position_pulses: int = 5
-    hold_s: float = 1.0
-    flush_interval_s: float = 0.1
-    feed: float = 1.0
-    max_feed: float = 1.5
-    max_hold_s: float = 600.0
-    other_problem: bool = False
-
-    def __post_init__(self) -> None:
-        checks = {
-            "rate_hz": (1.0, 2000.0),
-            "start_tolerance_rad": (1e-6, 0.5),
-            "approach_speed_rad_s": (1e-3, 2.0),
-            "following_error_rad": (1e-5, 1.0),
-            "communication_retries": (0, 1000),
-            "stop_acceleration_rad_s2": (1e-3, 100.0),
-            "stop_jerk_rad_s3": (1e-3, 10000.0),
-            "settle_s": (0.0, 60.0),
-            "rest_speed_rad_s": (1e-6, 1.0),
-            "rest_window_s": (0.0, 10.0),
-            "rest_position_pulses": (1, 100_000),
-            "hold_s": (0.0, 60.0),
-            "flush_interval_s": (1e-3, 0.1),
-            "feed": (0.0, 4.0),
-            "max_feed": (1.0, 4.0),
-            "max_hold_s": (0.0, 86_400.0),
-        }
-        for name, (low, high) in checks.items():
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and low <= value <= high):
-                raise InputError(f"{name} = {value!r}: expected a number in [{low}, {high}]")
-        for name in ("communication_retries", "rest_position_pulses"):
-            if not isinstance(getattr(self, name), int):
-                raise InputError(f"{name} = {getattr(self, name)!r}: expected an integer")
-        for name in ("approach", "other_problem"):
-            if not isinstance(getattr(self, name), bool):
-                raise InputError(f"{name} = {getattr(self, name)!r}: expected true or false")
-        if self.feed > self.max_feed:
-            raise InputError(f"feed = {self.feed!r}: expected at most max_feed ({self.max_feed!r})")
-        for name in ("settle_s", "hold_s"):
-            if getattr(self, name) < self.rest_window_s:
-                raise InputError(
-                    f"{name} = {getattr(self, name)!r}: expected at least rest_window_s "
-                    f"({self.rest_window_s!r} s), or rest could never be confirmed"
-                )
-
-    def joint_limits(self, problem: Problem) -> JointLimits:
-        """The limits every commanded motion keeps (the plan at any feed, the approach, the
-        stop): the problem's, with the stop's acceleration and jerk where it sets none."""
-        limits = problem.limits
-        return JointLimits(
-            limits.max_joint_speed,
-            limits.max_joint_acceleration or self.stop_acceleration_rad_s2,
-            limits.max_joint_jerk or self.stop_jerk_rad_s3,
-        )
-
-
-@dataclass(frozen=True)
-class LoopStatistics:
-    """Timing of the control loop: achieved rate and the error of each period."""
-
-    cycles: int
-    achieved_rate_hz: float
-    period_error_p50_ms: float
-    period_error_p99_ms: float
-    period_error_max_ms: float
-    overruns: int
-
-    @classmethod
-    def from_ticks(cls, ticks: list[float], period: float) -> LoopStatistics:
-        """From the start times of the cycles, s; an overrun is a period over 1.5 nominal."""
-        if len(ticks) < 2:
-            return cls(len(ticks), float("nan"), float("nan"), float("nan"), float("nan"), 0)
-        periods = np.diff(ticks)
-        error = np.abs(periods - period) * 1e3
-        return cls(
-            cycles=len(ticks),
-            achieved_rate_hz=float((len(ticks) - 1) / (ticks[-1] - ticks[0])),
-            period_error_p50_ms=float(np.percentile(error, 50)),
-            period_error_p99_ms=float(np.percentile(error, 99)),
-            period_error_max_ms=float(np.max(error)),
-            overruns=int(np.sum(periods > 1.5 * period)),
-        )
-
-
-@dataclass(frozen=True)
-class StopReport:
-    """How a safe stop went (SI; times on the log's clock, its ``time_s``).
-
-    Attributes
-    ----------
-    fault_seen_s : float, s
-        When the fault was seen: the start of the cycle that saw it.
-    stop_delivered : bool
-        Every goal of the stop reached the actuators.
-    at_rest : bool
-        Rest confirmed over the rest window (see :class:`ExecutionSettings`).
-    rest : str
-        "confirmed", or "not confirmed within the … s hold: " and why.
-    duration_s : float or None, s
-        From the fault seen to rest confirmed (None when it was not).
-    travel_rad, travel_deg : list of float, or None
-        How far each joint moved after the fault was seen, as measured: from the last
-        reading at or before it to the last reading of the hold (None without both).
-    failed_reads, failed_writes : int
-        Transactions that failed during the stop and the hold.
-    hardware_errors : list of str
-        Hardware errors the actuators reported during the stop and the hold.
-    """
-
-    fault_seen_s: float
-    stop_delivered: bool
-    at_rest: bool
-    rest: str
-    duration_s: float | None
-    travel_rad: list[float] | None
-    travel_deg: list[float] | None
-    failed_reads: int
-    failed_writes: int
-    hardware_errors: list[str]
-
-
-@dataclass(frozen=True)
-class RunStatus:
-    """The run as it stands after a control cycle, for a live view (SI).
-
-    Attributes
-    ----------
-    time_s : float, s
-        The log's time (since the loop's start).
-    phase : str
-        "approach", "plan", "settle", "stop" or "hold" (after a stop).
-    plan_time_s, plan_duration_s : float, s
-        How far along the plan the goal is (τ), and the plan's length.
-    feed, feed_target : float
-        The pace (1: as planned) and the pace it is heading for.
-    held : bool
-        The operator holds the feed.
-    following_error_rad : float or None, rad
-        The larger joint's distance from its goal (None in a cycle not checked).
-    torque_nm : tuple of float, or None, N·m
-        The actuators' torques from their current (None after a failed read).
-    status : str
-        The log's status of the cycle.
-    """
-
-    time_s: float
-    phase: str
-    plan_time_s: float
-    plan_duration_s: float
-    feed: float
-    feed_target: float
-    held: bool
-    following_error_rad: float | None
-    torque_nm: tuple[float, float] | None
-    status: str
-
-
-@dataclass
-class ExecutionResult:
-    """How a run ended. ``completed`` is False when it ended in a safe stop; ``reason``
-    says why, in one line (also when rest was not proven after a completed plan);
-    ``at_rest``: rest was proven at the end; ``stop`` says how the stop went; ``signals``
-    lists every SIGINT and SIGTERM received, with the phase it arrived in; ``feed_events``
-    every hold, resume and override, with its time (s, the log's clock) and plan time, as
-    the header has them."""
-
-    completed: bool
-    reason: str
-    log_path: Path
-    samples: int
-    statistics: LoopStatistics
-    at_rest: bool
-    backend: dict[str, Any] = field(default_factory=dict)
-    stop: StopReport | None = None
-    signals: list[str] = field(default_factory=list)
-    feed_events: list[dict[str, Any]] = field(default_factory=list)
-
-    @property
-    def succeeded(self) -> bool:
-        """The plan ran to its end and rest was proven after it."""
-        return self.completed and self.at_rest
 
 
 class _Ticker:
@@ -382,50 +138,6 @@ class _Segment:
 
     duration: float
     at: Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
-
-
-class _RestWindow:
-    """Proof of rest: consecutive samples covering ``window_s``, every one slower than
-    ``speed`` (rad/s), over which each joint's position spans fewer than ``pulses``."""
-
-    def __init__(self, settings: ExecutionSettings, actuator: Actuator) -> None:
-        self._speed = settings.rest_speed_rad_s
-        self._window = settings.rest_window_s
-        self._pulses = settings.rest_position_pulses
-        self._actuator = actuator
-        self._samples: deque[tuple[float, np.ndarray]] = deque()
-        self._why = "no reading"
-
-    def add(self, time_s: float, measurement: Measurement | None) -> bool:
-        """One sample at ``time_s`` (s); True once rest is confirmed."""
-        if measurement is None:
-            return self._restart("a read failed")
-        speed = np.abs(measurement.velocity_rad_s)
-        if np.any(speed >= self._speed):
-            j = int(np.argmax(speed))
-            return self._restart(f"theta{j + 1} at {speed[j]:.4f} rad/s")
-        self._samples.append((time_s, self._actuator.pulses(measurement.position_rad)))
-        while (span := self._span()).max() >= self._pulses:
-            j = int(np.argmax(span))
-            self._why = f"theta{j + 1} moved {span[j]} pulses in {self._covered():.3f} s"
-            self._samples.popleft()
-        return self._covered() >= self._window - _CLOCK_EPSILON_S
-
-    def why(self) -> str:
-        """Why rest is not confirmed (yet), in a few words."""
-        return f"{self._why}; at rest for the last {self._covered():.3f} s of {self._window:g} s"
-
-    def _restart(self, why: str) -> bool:
-        self._samples.clear()
-        self._why = why
-        return False
-
-    def _span(self) -> np.ndarray:
-        pulses = np.array([p for _, p in self._samples])
-        return pulses.max(axis=0) - pulses.min(axis=0)
-
-    def _covered(self) -> float:
-        return self._samples[-1][0] - self._samples[0][0] if self._samples else 0.0
 
 
 class Executor:
@@ -522,42 +234,48 @@ class Executor:
 
         Raises :class:`PreflightError` before anything moves or is written when the plan
         or the robot's position is refused, and :class:`RunInterrupted` when a stop was
-        asked for (:meth:`stop`, SIGINT, SIGTERM) before connecting; returns how the run
+        asked for (:meth:`stop`, SIGINT, SIGTERM) before connecting (a :meth:`stop` made
+        before ``run`` counts: an operator's console starts first); returns how the run
         ended otherwise. A stop asked for later is honoured by the loop's first cycle.
         """
-        self._stop_requested, self._signals_seen, self._phase = None, [], "pre-flight"
-        with self._signals():
-            self.check_plan(trajectory)
-            self._requests.ceiling = feed_ceiling(self.problem, trajectory, self.settings.max_feed)
-            if self.settings.feed > self._requests.ceiling:
-                _LOG.warning(
-                    "feed %.0f%% is above this plan's ceiling, %.0f%% (the highest at which "
-                    "it keeps its limits): it starts at %.0f%%",
-                    100 * self.settings.feed,
-                    100 * self._requests.ceiling,
-                    100 * self._requests.ceiling,
-                )
-            log_path = Path(log_path)
-            if log_path.suffix != ".csv":
-                raise InputError(f"log {log_path}: expected a file name ending in .csv")
-            if self._stop_requested:
-                raise RunInterrupted(
-                    f"stopped during pre-flight ({self._stop_requested}): nothing moved, "
-                    "nothing was written"
-                )
-            backend = self.backend
-            self._phase = "connect"
-            backend.connect()
-            try:
-                measured = backend.read()
-                start = trajectory.position(trajectory.start_time)
-                approach = self._approach(measured.position_rad, start)
-                with frozen_heap():
-                    return self._run_connected(
-                        trajectory, approach, measured, log_path, header or {}
-                    )
-            finally:
-                backend.close()
+        self._signals_seen, self._phase = [], "pre-flight"
+        try:
+            with self._signals():
+                return self._preflight_and_run(trajectory, Path(log_path), header or {})
+        finally:
+            self._stop_requested = None  # a stop belongs to the run it ended
+
+    def _preflight_and_run(
+        self, trajectory: Trajectory, log_path: Path, header: dict[str, Any]
+    ) -> ExecutionResult:
+        self.check_plan(trajectory)
+        self._requests.ceiling = feed_ceiling(self.problem, trajectory, self.settings.max_feed)
+        if self.settings.feed > self._requests.ceiling:
+            _LOG.warning(
+                "feed %.0f%% is above this plan's ceiling, %.0f%% (the highest at which "
+                "it keeps its limits): it starts at %.0f%%",
+                100 * self.settings.feed,
+                100 * self._requests.ceiling,
+                100 * self._requests.ceiling,
+            )
+        if log_path.suffix != ".csv":
+            raise InputError(f"log {log_path}: expected a file name ending in .csv")
+        if self._stop_requested:
+            raise RunInterrupted(
+                f"stopped during pre-flight ({self._stop_requested}): nothing moved, "
+                "nothing was written"
+            )
+        backend = self.backend
+        self._phase = "connect"
+        backend.connect()
+        try:
+            measured = backend.read()
+            start = trajectory.position(trajectory.start_time)
+            approach = self._approach(measured.position_rad, start)
+            with frozen_heap():
+                return self._run_connected(trajectory, approach, measured, log_path, header)
+        finally:
+            backend.close()
 
     def _run_connected(
         self,
@@ -649,7 +367,7 @@ class Executor:
             cycle = self._begin_cycle()
             begin = cycle.time_s if begin is None else begin
             elapsed = min(cycle.time_s - begin, segment.duration)
-            if segment.duration - elapsed < _CLOCK_EPSILON_S:  # rounding must not add a cycle
+            if segment.duration - elapsed < CLOCK_EPSILON_S:  # rounding must not add a cycle
                 elapsed = segment.duration
             self._check(cycle, self._commanded.position)
             self._send(cycle, *segment.at(elapsed))
@@ -665,10 +383,8 @@ class Executor:
         settings, requests = self.settings, self._requests
         limits = settings.joint_limits(self.problem)
         override, held = asked = requests.requested()
-        profile = FeedProfile(
-            trajectory, limits, requests.ceiling, 0.0 if held else override, 0.5 / settings.rate_hz
-        )
-        begin, hold = None, _FeedHold(settings, self.problem.robot.actuator)
+        profile = FeedProfile(trajectory, limits, 0.0 if held else override, 0.5 / settings.rate_hz)
+        begin, hold = None, FeedHoldWatch(settings, self.problem.robot.actuator)
         try:
             while True:
                 cycle = self._begin_cycle()
@@ -682,7 +398,7 @@ class Executor:
                 self._check(cycle, self._commanded.position)
                 self._send(cycle, *profile.goal(pace))
                 self._end_cycle("plan", cycle, checked=True)
-                for event in hold.watch(cycle, pace):
+                for event in hold.watch(cycle.time_s, cycle.measurement, pace):
                     self._feed_event(cycle, pace, event)
                 if hold.too_long(cycle.time_s):
                     reason = f"feed held longer than max_hold_s ({settings.max_hold_s:g} s)"
@@ -763,7 +479,7 @@ class Executor:
             previous_s, delivered = self._previous
             step = cycle.time_s - previous_s if delivered else self._ticker.period
             t = min(elapsed + step, segment.duration)
-            if segment.duration - t < _CLOCK_EPSILON_S:
+            if segment.duration - t < CLOCK_EPSILON_S:
                 t = segment.duration
             if self._send(cycle, *segment.at(t)):
                 elapsed = t
@@ -799,12 +515,12 @@ class Executor:
         limit_s: float,
         inspect: Callable[[_Cycle], None],
         checked: bool,
-    ) -> tuple[float | None, _RestWindow]:
+    ) -> tuple[float | None, RestWindow]:
         """Hold ``target`` (rad), each cycle inspected (``checked``: a run of failed cycles
         is a fault), until rest is confirmed or ``limit_s`` (s) passes; the time rest was
         confirmed (None if not), and the window."""
         self._phase = phase
-        window = _RestWindow(self.settings, self.problem.robot.actuator)
+        window = RestWindow(self.settings, self.problem.robot.actuator)
         begin = None
         while True:
             cycle = self._begin_cycle()
@@ -814,7 +530,7 @@ class Executor:
             self._end_cycle(phase, cycle, checked=checked)
             if window.add(cycle.time_s, cycle.measurement):
                 return cycle.time_s, window
-            if cycle.time_s - begin >= limit_s - _CLOCK_EPSILON_S:
+            if cycle.time_s - begin >= limit_s - CLOCK_EPSILON_S:
                 return None, window
 
     # ------------------------------------------------------------------ cycles
@@ -1019,36 +735,6 @@ class Executor:
         finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)
-
-
-class _FeedHold:
-    """Watches a feed hold: when the feed reached 0, when rest was confirmed, and how long
-    it has lasted."""
-
-    def __init__(self, settings: ExecutionSettings, actuator: Actuator) -> None:
-        self._settings, self._actuator = settings, actuator
-        self._since: float | None = None
-        self._rest: _RestWindow | None = None
-
-    def watch(self, cycle: _Cycle, pace: Pace) -> list[str]:
-        """The hold's events in this cycle: "held" (the feed reached 0 on the path), "at
-        rest" (rest confirmed, as after a stop)."""
-        if pace.feed > 0.0 or pace.target > 0.0:
-            self._since, self._rest = None, None
-            return []
-        events = []
-        if self._since is None:
-            self._since = cycle.time_s
-            self._rest = _RestWindow(self._settings, self._actuator)
-            events.append("held")
-        if self._rest is not None and self._rest.add(cycle.time_s, cycle.measurement):
-            self._rest = None
-            events.append("at rest")
-        return events
-
-    def too_long(self, time_s: float) -> bool:
-        """The hold has lasted longer than ``max_hold_s``."""
-        return self._since is not None and time_s - self._since > self._settings.max_hold_s
 
 
 def _request_events(before: tuple[float, bool], after: tuple[float, bool]) -> list[str]:

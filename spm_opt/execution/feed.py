@@ -124,8 +124,6 @@ class FeedProfile:
     ----------
     trajectory : Trajectory
     limits : JointLimits
-    ceiling : float
-        The highest feed (see :func:`feed_ceiling`).
     feed : float
         The feed at the plan's start (the plan starts at rest, so it may start at any).
     sample_s : float, s
@@ -136,7 +134,6 @@ class FeedProfile:
         self,
         trajectory: Trajectory,
         limits: JointLimits,
-        ceiling: float,
         feed: float,
         sample_s: float,
     ) -> None:
@@ -149,9 +146,8 @@ class FeedProfile:
             RULES["joint acceleration"].allowed(limits.acceleration),
             RULES["joint jerk"].allowed(limits.jerk),
         )
-        self.ceiling = ceiling
         self._sample_s = sample_s
-        feed = min(max(feed, 0.0), ceiling)
+        feed = max(feed, 0.0)
         self._origin_s, self._origin = 0.0, (0.0, feed, 0.0)
         self._motion: ruckig.Trajectory | None = None
         self._end = self._origin
@@ -159,8 +155,9 @@ class FeedProfile:
 
     def advance(self, time_s: float, target: float) -> Pace:
         """The pace at ``time_s`` (s since the plan phase began), heading for ``target``
-        (clipped to [0, ceiling]) if a jerk-limited change to it fits the limits now."""
-        target = min(max(target, 0.0), self.ceiling)
+        (≥ 0; at most the plan's ceiling, which :class:`FeedRequests` keeps) if a
+        jerk-limited change to it fits the limits now."""
+        target = max(target, 0.0)
         if target != self._target:
             state = self._state(time_s)
             motion = self._change(state, target)
@@ -334,8 +331,8 @@ def _end_tau(motion: ruckig.Trajectory) -> float:
 class FeedRequests:
     """What the operator asks for, from any thread: a feed override, hold and resume.
 
-    The feed the executor heads for is 0 while held, else the override (clipped to the
-    ceiling by :class:`FeedProfile`). ``ceiling`` bounds the override's steps.
+    The feed the executor heads for is 0 while held, else the override, never above
+    ``ceiling`` (see :func:`feed_ceiling`): this is the one place the ceiling applies.
     """
 
     def __init__(self, feed: float = 1.0, ceiling: float = 1.0) -> None:
@@ -350,14 +347,13 @@ class FeedRequests:
         fraction = _checked_feed(fraction)
         with self._lock:
             self._override = fraction
-        return min(fraction, self.ceiling)
+            return self._applied()
 
     def step_feed(self, step: float) -> float:
         """Change the override by ``step``, within [``FEED_STEP``, ceiling]; returns it."""
         with self._lock:
-            stepped = round(min(self._override, self.ceiling) + step, 6)
-            self._override = min(max(stepped, FEED_STEP), self.ceiling)
-            return self._override
+            self._override = max(round(self._applied() + step, 6), FEED_STEP)
+            return self._applied()
 
     def hold(self) -> None:
         """Bring the tool to rest on the path."""
@@ -378,7 +374,11 @@ class FeedRequests:
     def requested(self) -> tuple[float, bool]:
         """(override, held) as they stand."""
         with self._lock:
-            return min(self._override, self.ceiling), self._held
+            return self._applied(), self._held
+
+    def _applied(self) -> float:
+        """The override as it applies: at most the ceiling (the lock held)."""
+        return min(self._override, self.ceiling)
 
 
 def _checked_feed(fraction: float) -> float:

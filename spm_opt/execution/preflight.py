@@ -11,7 +11,7 @@ Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this or
    goal after it, so the plan's speed and acceleration at each end must be small enough
    that joining rest within one control period T keeps the limits every commanded motion
    keeps (acceleration a, jerk j; see
-   :meth:`~spm_opt.execution.executor.ExecutionSettings.joint_limits`): a speed step v
+   :meth:`~spm_opt.execution.settings.ExecutionSettings.joint_limits`): a speed step v
    commands v/T of acceleration and v/T² of jerk, an acceleration step α commands α/T of
    jerk. So |q̇| ≤ min(a T, j T²) and |q̈| ≤ j T at both ends (with the evaluator's
    0.5 %): 1e-3 rad/s and 0.1 rad/s² under the paper's 1 rad/s² and 10 rad/s³ at 100 Hz.

@@ -1,0 +1,126 @@
+"""How the executor runs a plan: its settings, checked when made (SI)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from spm_opt.errors import InputError
+from spm_opt.execution.feed import JointLimits
+from spm_opt.model.params import DEG
+from spm_opt.problem import Problem
+
+
+@dataclass(frozen=True)
+class ExecutionSettings:
+    """How the executor runs a plan (SI).
+
+    Attributes
+    ----------
+    rate_hz : float, Hz
+        Control loop rate.
+    start_tolerance_rad : float, rad
+        Largest distance of the robot from the plan's start at which the plan may begin.
+    approach : bool
+        Move to the plan's start first (a ruckig move from rest to rest) when farther.
+    approach_speed_rad_s : float, rad/s
+        Speed limit of the approach move.
+    following_error_rad : float, rad
+        Largest distance between the planned and the measured position of a joint.
+    communication_retries : int
+        Consecutive control cycles with a failed read or a failed write tolerated before
+        the run stops.
+    stop_acceleration_rad_s2, stop_jerk_rad_s3 : float
+        Limits of the stop and of the approach (defaults when the problem has none).
+    settle_s : float, s
+        After the plan's end, longest time allowed for the joints to come to rest.
+    rest_speed_rad_s : float, rad/s
+        Measured joint speed below which a sample counts as at rest.
+    rest_window_s : float, s
+        Rest is confirmed by samples covering this long, every one slower than
+        ``rest_speed_rad_s``, over which each joint's measured position spans fewer than
+        ``rest_position_pulses`` encoder pulses.
+    rest_position_pulses : int
+        See ``rest_window_s`` (pulses of the actuator's encoder: 5 of the L54's 361,384
+        per revolution are 0.005°).
+    hold_s : float, s
+        After a stop, longest time spent holding to confirm rest.
+    flush_interval_s : float, s
+        Longest time a sample waits before it is written to the log.
+    feed : float
+        The feed override the plan starts at, a fraction of its planned pace.
+    max_feed : float
+        Highest override allowed, if every limit allows it (see
+        :func:`~spm_opt.execution.feed.feed_ceiling`).
+    max_hold_s : float, s
+        Longest feed hold; a longer one ends in the safe stop.
+    other_problem : bool
+        Run a plan made for another problem, or one that records none, under this
+        problem's limits (see :mod:`spm_opt.execution.preflight`).
+    """
+
+    rate_hz: float = 100.0
+    start_tolerance_rad: float = 0.25 * DEG
+    approach: bool = False
+    approach_speed_rad_s: float = 0.1
+    following_error_rad: float = 1.0 * DEG
+    communication_retries: int = 3
+    stop_acceleration_rad_s2: float = 1.0
+    stop_jerk_rad_s3: float = 10.0
+    settle_s: float = 1.0
+    rest_speed_rad_s: float = 0.005
+    rest_window_s: float = 0.2
+    rest_position_pulses: int = 5
+    hold_s: float = 1.0
+    flush_interval_s: float = 0.1
+    feed: float = 1.0
+    max_feed: float = 1.5
+    max_hold_s: float = 600.0
+    other_problem: bool = False
+
+    def __post_init__(self) -> None:
+        checks = {
+            "rate_hz": (1.0, 2000.0),
+            "start_tolerance_rad": (1e-6, 0.5),
+            "approach_speed_rad_s": (1e-3, 2.0),
+            "following_error_rad": (1e-5, 1.0),
+            "communication_retries": (0, 1000),
+            "stop_acceleration_rad_s2": (1e-3, 100.0),
+            "stop_jerk_rad_s3": (1e-3, 10000.0),
+            "settle_s": (0.0, 60.0),
+            "rest_speed_rad_s": (1e-6, 1.0),
+            "rest_window_s": (0.0, 10.0),
+            "rest_position_pulses": (1, 100_000),
+            "hold_s": (0.0, 60.0),
+            "flush_interval_s": (1e-3, 0.1),
+            "feed": (0.0, 4.0),
+            "max_feed": (1.0, 4.0),
+            "max_hold_s": (0.0, 86_400.0),
+        }
+        for name, (low, high) in checks.items():
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and low <= value <= high):
+                raise InputError(f"{name} = {value!r}: expected a number in [{low}, {high}]")
+        for name in ("communication_retries", "rest_position_pulses"):
+            if not isinstance(getattr(self, name), int):
+                raise InputError(f"{name} = {getattr(self, name)!r}: expected an integer")
+        for name in ("approach", "other_problem"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"{name} = {getattr(self, name)!r}: expected true or false")
+        if self.feed > self.max_feed:
+            raise InputError(f"feed = {self.feed!r}: expected at most max_feed ({self.max_feed!r})")
+        for name in ("settle_s", "hold_s"):
+            if getattr(self, name) < self.rest_window_s:
+                raise InputError(
+                    f"{name} = {getattr(self, name)!r}: expected at least rest_window_s "
+                    f"({self.rest_window_s!r} s), or rest could never be confirmed"
+                )
+
+    def joint_limits(self, problem: Problem) -> JointLimits:
+        """The limits every commanded motion keeps (the plan at any feed, the approach, the
+        stop): the problem's, with the stop's acceleration and jerk where it sets none."""
+        limits = problem.limits
+        return JointLimits(
+            limits.max_joint_speed,
+            limits.max_joint_acceleration or self.stop_acceleration_rad_s2,
+            limits.max_joint_jerk or self.stop_jerk_rad_s3,
+        )
