@@ -356,11 +356,7 @@ class DynamixelRobot:
             raise InputError(f"dxl_id: {dxl_id!r} is not one of this robot's ids {self.ids}")
         if self._port is None:
             self._open()
-        packet = [0] * 10
-        packet[4], packet[5], packet[7] = dxl_id, 3, self._sdk.INST_REBOOT
-        self._transaction(
-            "reboot", dxl_id, lambda: self._packets.txPacket(self._port, packet), reply_length=0
-        )
+        self._transaction("reboot", dxl_id, self._send_bare(dxl_id, "INST_REBOOT"), 0)
 
     # --------------------------------------------------------------------- cycle
     def read(self) -> Measurement:
@@ -475,14 +471,8 @@ class DynamixelRobot:
         self._last_goal = None
 
     def _check_device(self, k: int, dxl_id: int) -> None:
-        packet = [0] * 10
-        packet[4], packet[5], packet[7] = dxl_id, 3, self._sdk.INST_PING
         reply = self._transaction(
-            "ping",
-            dxl_id,
-            lambda: self._packets.txPacket(self._port, packet),
-            reply_length=3,
-            allow_alert=True,
+            "ping", dxl_id, self._send_bare(dxl_id, "INST_PING"), 3, allow_alert=True
         )
         model = reply[0] | reply[1] << 8
         self.model_numbers[k], self.firmware_versions[k] = model, reply[2]
@@ -508,6 +498,14 @@ class DynamixelRobot:
             self._read_value(dxl_id, ADDR_MIN_POSITION_LIMIT, 4, signed=True),
             self._read_value(dxl_id, ADDR_MAX_POSITION_LIMIT, 4, signed=True),
         )
+
+    def _send_bare(self, dxl_id: int, instruction: str) -> Callable[[], int]:
+        """A sender of the instruction the SDK names ``instruction`` (ping, reboot), with no
+        parameters, to ``dxl_id``; its reply is received by :meth:`_transaction` (the SDK's
+        own ``ping`` drops the firmware version and takes any reply of the right id)."""
+        packet = [0] * 10
+        packet[4], packet[5], packet[7] = dxl_id, 3, getattr(self._sdk, instruction)
+        return lambda: self._packets.txPacket(self._port, packet)
 
     def _read_value(
         self, dxl_id: int, address: int, length: int, signed: bool = False, retry: bool = True
