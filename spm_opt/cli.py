@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, NoReturn
 import numpy as np
 
 from spm_opt.errors import InputError, RunInterrupted, SpmOptError, require
+from spm_opt.execution.tracking import TRACKING_MODES
 
 if TYPE_CHECKING:
     from spm_opt.execution import ExecutionResult
@@ -162,7 +163,20 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         help="run a plan made for another problem (or with no sidecar) under --problem's limits",
     )
     execute.add_argument(
+        "--tracking",
+        choices=TRACKING_MODES,
+        default="lead",
+        help="lead: each goal leads the plan by the position loop's lag (the robot file's "
+        "loop parameters); none: the goal is the plan (default lead)",
+    )
+    execute.add_argument(
         "--realtime", action="store_true", help="sim: run on the wall clock (default: fast)"
+    )
+    execute.add_argument(
+        "--trace",
+        type=Path,
+        metavar="FILE",
+        help="sim: save the plant's true state here (.npz; spm-opt evaluate --trace reads it)",
     )
     execute.add_argument(
         "--start-deg",
@@ -244,7 +258,13 @@ def _execute(args: argparse.Namespace) -> None:
         max_feed=max(ExecutionSettings.max_feed, args.feed),
         max_hold_s=args.max_hold,
         other_problem=args.other_problem,
+        tracking=args.tracking,
     )
+    if args.trace is not None and (args.backend != "sim" or args.trace.suffix != ".npz"):
+        raise InputError(
+            f"--trace {args.trace}: expected a file name ending in .npz, with --backend sim "
+            "(the emulator's own --trace records the plant behind the Dynamixel backend)"
+        )
     problem = load_problem(args.problem)
     trajectory = Trajectory.from_csv(args.plan)
     keys = _keys_terminal(args.interactive)
@@ -270,6 +290,8 @@ def _execute(args: argparse.Namespace) -> None:
     executor = Executor(problem, backend, settings)
     with console(executor, problem, trajectory, sys.stderr, keys):
         result = executor.run(trajectory, args.log)
+    if args.trace is not None:
+        backend.trace.save(args.trace)
     loop = result.statistics
     print(
         f"{args.log}: {result.samples} samples, {loop.achieved_rate_hz:.1f} Hz achieved, "

@@ -77,6 +77,7 @@ from spm_opt.execution.emulator import (
     spawn_emulator,
 )
 from spm_opt.execution.plant import StateTrace
+from spm_opt.execution.tracking import Lead
 from spm_opt.limits import RULES
 
 DEG = np.pi / 180.0
@@ -85,6 +86,8 @@ FAULT_AT_S = 1.0
 SETTINGS = ExecutionSettings()
 PERIOD_S = 1.0 / SETTINGS.rate_hz
 GOALS = ["goal_theta1_rad", "goal_theta2_rad"]
+REFERENCES = ["reference_theta1_rad", "reference_theta2_rad"]
+"""The logged references: the commanded motion, of which the goals are the lead."""
 LOG_DIGITS_ERROR = 5e-10
 """Relative rounding of a goal written to the log with 9 significant digits."""
 
@@ -135,10 +138,11 @@ def stop_bound(problem: so.Problem, trajectory: so.Trajectory) -> StopBound:
 
 
 def received_goals(table: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    """The goals the actuators received, from three before the stop to its end, and their
-    times on the goal stream's own clock (item 2 of the module's docstring): each goal was
-    sampled at its cycle's start, except that an outage (rows whose write failed) pauses
-    the stop's clock, the next goal being one period along from the last delivered."""
+    """The references of the goals the actuators received, from three before the stop to
+    its end, and their times on the goal stream's own clock (item 2 of the module's
+    docstring): each was sampled at its cycle's start, except that an outage (rows whose
+    write failed) pauses the stop's clock, the next one period along from the last
+    delivered."""
     delivered = ~table["status"].str.contains("write failed").to_numpy()
     phases = table["phase"].to_numpy()
     first_stop = int(np.argmax(phases == "stop"))
@@ -150,7 +154,7 @@ def received_goals(table: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     )
     time = table["time_s"].to_numpy()
     steps = np.where(np.diff(rows) == 1, np.diff(time[rows]), PERIOD_S)
-    return np.concatenate([[0.0], np.cumsum(steps)]), table[GOALS].to_numpy()[rows]
+    return np.concatenate([[0.0], np.cumsum(steps)]), table[REFERENCES].to_numpy()[rows]
 
 
 def derivative_estimates(t: np.ndarray, q: np.ndarray, order: int) -> np.ndarray:
@@ -308,7 +312,7 @@ def test_a_wire_fault_ends_in_a_stop_the_true_state_confirms(
     assert_every_sample_up_to_the_fault(table, header, result, FAULT_AT_S)
     assert_the_commanded_stop_kept_its_limits(table, hardware_problem, bound)
     assert_the_plant_came_to_rest(
-        trace, header, hardware_problem, bound, SETTINGS.following_error_rad
+        trace, header, hardware_problem, bound, SETTINGS.following_error_bounds[1]
     )
 
 
@@ -324,7 +328,7 @@ def test_refused_writes_stop_from_the_last_goal_the_actuators_received(
     assert_every_sample_up_to_the_fault(table, header, result, FAULT_AT_S)
     assert_the_commanded_stop_kept_its_limits(table, hardware_problem, bound)
     assert_the_plant_came_to_rest(
-        trace, header, hardware_problem, bound, SETTINGS.following_error_rad
+        trace, header, hardware_problem, bound, SETTINGS.following_error_bounds[1]
     )
     failed = table["status"].str.contains("write failed").to_numpy()
     seen = header["stop"]["fault_seen_s"]
@@ -340,7 +344,9 @@ def test_refused_writes_stop_from_the_last_goal_the_actuators_received(
     # it): then the plant holds that goal, the plan's at that cycle
     held = trace["goal_rad"][_row_at(trace, seen)]
     pulse = 2 * np.pi / hardware_problem.robot.actuator.pulses_per_rev
-    attempted = move.position(table["time_s"].iloc[first] - table["time_s"].iloc[0])
+    at = table["time_s"].iloc[first] - table["time_s"].iloc[0]
+    lead = Lead.for_actuator(hardware_problem.robot.actuator, PERIOD_S, SETTINGS.tracking)
+    attempted = lead.goal(move.position(at), move.velocity(at), move.acceleration(at))
     candidates = np.array([table[GOALS].iloc[first - 1], attempted])
     assert np.any(np.all(np.abs(candidates - held) <= pulse, axis=1)), (held, candidates)
     # while the line was down, the stop's goals waited for it
@@ -409,10 +415,12 @@ def test_a_simulated_fault_ends_in_a_stop_the_true_state_confirms(
     hardware_problem, move, tmp_path, kind, reason
 ):
     start = move.position(0.0)
-    settings, tolerance = SETTINGS, SETTINGS.following_error_rad
-    if kind == "following error":  # a tolerance under the position loop's lag at speed
+    settings, tolerance = SETTINGS, SETTINGS.following_error_bounds[1]
+    if kind == "following error":  # unled goals, a tolerance under the loop's lag at speed
         tolerance = 0.05 * DEG
-        settings = ExecutionSettings(following_error_rad=tolerance)
+        settings = ExecutionSettings(
+            tracking="none", min_following_error_rad=tolerance, max_following_error_rad=tolerance
+        )
         robot = SimulatedRobot(hardware_problem.robot, start_rad=start)
     else:
         signals = [(FAULT_AT_S, getattr(signal, kind))]

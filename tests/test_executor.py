@@ -87,7 +87,7 @@ def test_a_robot_away_from_the_start_is_refused_or_approached(
     assert result.completed
     table, _ = read_log(tmp_path / "run.csv")
     approach = table[table["phase"] == "approach"]
-    goals = approach[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+    goals = approach[["reference_theta1_rad", "reference_theta2_rad"]].to_numpy()
     np.testing.assert_allclose(goals[0], start, atol=1e-5)
     np.testing.assert_allclose(goals[-1], hardware_plan.position(0.0), atol=1e-9)
     speed = np.abs(np.diff(goals, axis=0)) * 100.0
@@ -106,7 +106,10 @@ def test_a_following_error_ends_in_a_jerk_limited_stop_at_rest(
     hardware_problem, hardware_plan, tmp_path
 ):
     robot = SimulatedRobot(hardware_problem.robot, start_rad=hardware_plan.position(0.0))
-    settings = ExecutionSettings(following_error_rad=0.05 * DEG)
+    tolerance = 0.05 * DEG  # under the unled goals' lag at speed
+    settings = ExecutionSettings(
+        tracking="none", min_following_error_rad=tolerance, max_following_error_rad=tolerance
+    )
     result = execute(hardware_plan, robot, hardware_problem, tmp_path / "run.csv", settings)
     assert not result.completed and result.at_rest
     assert result.reason.startswith("following error of theta")
@@ -170,5 +173,7 @@ def test_loop_statistics_from_tick_times():
 def test_bad_settings_are_one_line_errors():
     with pytest.raises(so.InputError, match=r"rate_hz = 0: expected a number in \[1.0, 2000.0\]"):
         ExecutionSettings(rate_hz=0)
-    with pytest.raises(so.InputError, match="following_error_rad = nan"):
-        ExecutionSettings(following_error_rad=float("nan"))
+    with pytest.raises(so.InputError, match="min_following_error_rad = nan"):
+        ExecutionSettings(min_following_error_rad=float("nan"))
+    with pytest.raises(so.InputError, match="tracking = 'ahead': expected one of lead, none"):
+        ExecutionSettings(tracking="ahead")

@@ -97,7 +97,7 @@ def assert_commanded_within_limits(table: pd.DataFrame, problem: so.Problem) -> 
     acceleration and jerk within the limits as the evaluator allows them."""
     rows = table[table["phase"].isin(["plan", "settle"])]
     t = rows["time_s"].to_numpy()
-    q = rows[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+    q = rows[["reference_theta1_rad", "reference_theta2_rad"]].to_numpy()
     limits = SETTINGS.joint_limits(problem)
     rounding = LOG_DIGITS_ERROR * np.max(np.abs(q))
     for order, limit, rule in (
@@ -232,7 +232,7 @@ def test_the_log_rows_carry_the_plan_time_feed_and_target(steered_run, hardware_
     assert plan[["plan_time_s", "feed", "feed_target"]].notna().all().all()
     assert table.loc[table["phase"] != "plan", "feed"].isna().all()
     # the goal is the plan at the logged plan time: the pace changed, never the path
-    goals = plan[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+    goals = plan[["reference_theta1_rad", "reference_theta2_rad"]].to_numpy()
     on_plan = hardware_plan.position(plan["plan_time_s"].to_numpy() + hardware_plan.start_time)
     np.testing.assert_allclose(goals, on_plan, atol=1e-8)
     # the plan time advances at the logged feed: the trapezoid rule's error is at most

@@ -103,7 +103,7 @@ def test_the_plan_is_taken_at_the_logged_plan_time_and_feed(steered, hardware_pl
     plan = table[(table["phase"] == "plan") & table["position_theta1_rad"].notna()]
     tau = plan["plan_time_s"].to_numpy() + hardware_plan.start_time
     np.testing.assert_array_equal(samples.planned_q, hardware_plan.position(tau))
-    goals = plan[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+    goals = plan[["reference_theta1_rad", "reference_theta2_rad"]].to_numpy()
     np.testing.assert_allclose(samples.planned_q, goals, atol=1e-8)
     # the planned rate and acceleration are the commanded stream's (q′ r, q″ r² + q′ ṙ):
     # here within 1 mrad/s and 3 mrad/s² of its differences; without q′ ṙ, 1.9 rad/s² off

@@ -58,6 +58,7 @@ from spm_opt.execution.realtime import frozen_heap
 from spm_opt.execution.rest import FeedHoldWatch, RestWindow
 from spm_opt.execution.results import ExecutionResult, LoopStatistics, RunStatus, StopReport
 from spm_opt.execution.settings import ExecutionSettings
+from spm_opt.execution.tracking import Lead, following_error_limit
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
 from spm_opt.ruckig_local import calculate_locally
@@ -123,12 +124,13 @@ class _Stop(Exception):
 
 @dataclass
 class _Commanded:
-    """The last goal the actuators received: position, rate, acceleration (the stop
-    starts from here)."""
+    """The reference of the last goal the actuators received: position, rate, acceleration
+    (the stop starts from here), and that goal (the reference led by the loop's lag)."""
 
     position: np.ndarray
     velocity: np.ndarray
     acceleration: np.ndarray
+    goal: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -162,6 +164,9 @@ class Executor:
         self._signals_seen: list[str] = []
         self._phase = "connect"
         self._requests = FeedRequests(self.settings.feed, self.settings.max_feed)
+        self._lead = Lead.for_actuator(
+            problem.robot.actuator, 1.0 / self.settings.rate_hz, self.settings.tracking
+        )
         self._feed_events: list[dict[str, Any]] = []
         self._pace: Pace | None = None
         self._plan_duration = 0.0
@@ -206,6 +211,7 @@ class Executor:
             trajectory,
             settings.joint_limits(self.problem),
             1.0 / settings.rate_hz,
+            self._lead,
             settings.other_problem,
         )
 
@@ -221,7 +227,7 @@ class Executor:
             )
         return self._ruckig_segment(
             "approach",
-            _Commanded(measured, np.zeros(2), np.zeros(2)),
+            _Commanded(measured, np.zeros(2), np.zeros(2), measured),
             target=start,
             speed=self.settings.approach_speed_rad_s,
         )
@@ -249,7 +255,9 @@ class Executor:
         self, trajectory: Trajectory, log_path: Path, header: dict[str, Any]
     ) -> ExecutionResult:
         self.check_plan(trajectory)
-        self._requests.ceiling = feed_ceiling(self.problem, trajectory, self.settings.max_feed)
+        self._requests.ceiling = feed_ceiling(
+            self.problem, trajectory, self.settings.max_feed, self._lead
+        )
         if self.settings.feed > self._requests.ceiling:
             _LOG.warning(
                 "feed %.0f%% is above this plan's ceiling, %.0f%% (the highest at which "
@@ -297,6 +305,11 @@ class Executor:
                 "backend": self.backend.describe(),
                 "settings": dataclasses.asdict(settings),
                 "feed_ceiling": self._requests.ceiling,
+                "tracking": {
+                    "mode": settings.tracking,
+                    "lead_rate_s": self._lead.rate_s.tolist(),
+                    "lead_acceleration_s2": self._lead.acceleration_s2.tolist(),
+                },
                 "clock_origin_s": self._ticker.origin,
                 "software_version": package_version(),
                 "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
@@ -305,7 +318,8 @@ class Executor:
         )
         self._feed_events, self._pace = [], None
         self._plan_duration = trajectory.duration
-        self._commanded = _Commanded(first.position_rad.copy(), np.zeros(2), np.zeros(2))
+        at = first.position_rad.copy()
+        self._commanded = _Commanded(at, np.zeros(2), np.zeros(2), at)
         self._last_measurement = first
         self._failed_cycles = self._reads_failed = self._writes_failed = 0
         self._previous = (-self._ticker.period, True)
@@ -369,8 +383,9 @@ class Executor:
             elapsed = min(cycle.time_s - begin, segment.duration)
             if segment.duration - elapsed < CLOCK_EPSILON_S:  # rounding must not add a cycle
                 elapsed = segment.duration
-            self._check(cycle, self._commanded.position)
-            self._send(cycle, *segment.at(elapsed))
+            reference = segment.at(elapsed)
+            self._check(cycle, reference)
+            self._send(cycle, *reference)
             self._end_cycle(phase, cycle, checked=True)
             if elapsed >= segment.duration:
                 return
@@ -395,8 +410,9 @@ class Executor:
                     self._feed_event(cycle, pace, event)
                 asked = requested
                 self._pace = pace
-                self._check(cycle, self._commanded.position)
-                self._send(cycle, *profile.goal(pace))
+                reference = profile.goal(pace)
+                self._check(cycle, reference)
+                self._send(cycle, *reference)
                 self._end_cycle("plan", cycle, checked=True)
                 for event in hold.watch(cycle.time_s, cycle.measurement, pace):
                     self._feed_event(cycle, pace, event)
@@ -425,8 +441,9 @@ class Executor:
         """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;
         (True, "confirmed") if confirmed, else (False, "not proven within …: why")."""
         settle_s = self.settings.settle_s
+        at_rest = (target, np.zeros(2), np.zeros(2))
         confirmed, window = self._rest(
-            "settle", target, settle_s, lambda c: self._check(c, target), True
+            "settle", target, settle_s, lambda c: self._check(c, at_rest), True
         )
         if confirmed is not None:
             return True, "confirmed"
@@ -560,12 +577,14 @@ class Executor:
     def _send(
         self, cycle: _Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
     ) -> bool:
-        """Write the goal; only a write that succeeded becomes the commanded state. A write
-        reported failed counts as not delivered, though a port can fail a packet that left
-        (see :mod:`spm_opt.execution.dynamixel`); the stop's first goal, one period along
-        from the last goal known, is then the one that arrived to within q̈ T²."""
+        """Write the goal of a reference state (led by the loop's lag); only a write that
+        succeeded becomes the commanded state. A write reported failed counts as not
+        delivered, though a port can fail a packet that left (see
+        :mod:`spm_opt.execution.dynamixel`); the stop's first goal, one period along from
+        the last goal known, is then the one that arrived to within q̈ T²."""
+        goal = self._lead.goal(position, velocity, acceleration)
         try:
-            self.backend.write_goal(position)
+            self.backend.write_goal(goal)
         except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
             cycle.write_failed = True
             self._writes_failed += 1
@@ -573,7 +592,7 @@ class Executor:
             return False
         commanded = self._commanded
         commanded.position, commanded.velocity = position, velocity
-        commanded.acceleration = acceleration
+        commanded.acceleration, commanded.goal = acceleration, goal
         return True
 
     def _end_cycle(self, phase: str, cycle: _Cycle, checked: bool) -> None:
@@ -593,16 +612,18 @@ class Executor:
         if reason:
             raise _Stop(reason, cycle, logged=True)
 
-    def _check(self, cycle: _Cycle, expected: np.ndarray) -> None:
+    def _check(self, cycle: _Cycle, reference: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
         """Raise :class:`_Stop` on an interrupt, too many failed cycles (this one's read
-        included), a hardware error or a following error; the reason joins the notes."""
-        reason = self._fault(cycle, expected)
+        included), a hardware error or a following error (the measured position against
+        the reference ``(position, rate, acceleration)`` at the cycle's time); the reason
+        joins the notes."""
+        reason = self._fault(cycle, reference[0], reference[1])
         if reason:
             if reason not in cycle.notes:
                 cycle.notes.append(reason)
             raise _Stop(reason, cycle)
 
-    def _fault(self, cycle: _Cycle, expected: np.ndarray) -> str:
+    def _fault(self, cycle: _Cycle, expected: np.ndarray, rate: np.ndarray) -> str:
         if self._stop_requested:
             return f"interrupted ({self._stop_requested})"
         if cycle.unexpected:
@@ -619,11 +640,14 @@ class Executor:
                 return f"hardware error on actuator {joint + 1}: {names}"
         error = np.abs(measurement.position_rad - expected)
         cycle.following_error = error
-        worst = int(np.argmax(error))
-        if error[worst] > self.settings.following_error_rad:
+        allowed = following_error_limit(
+            rate, self.problem.limits.max_joint_speed, *self.settings.following_error_bounds
+        )
+        worst = int(np.argmax(error / allowed))
+        if error[worst] > allowed[worst]:
             return (
                 f"following error of theta{worst + 1}: {error[worst] / DEG:.3f} deg "
-                f"(tolerance {self.settings.following_error_rad / DEG:.3f} deg)"
+                f"(tolerance {allowed[worst] / DEG:.3f} deg at {abs(rate[worst]):.3f} rad/s)"
             )
         return ""
 
@@ -647,11 +671,14 @@ class Executor:
     def _log(self, phase: str, cycle: _Cycle) -> None:
         """One sample: the pace along the plan (in its phase), the goal the actuators hold
         (the last delivered) and the reading; the same as :attr:`status`."""
-        goal, measurement, pace = self._commanded.position, cycle.measurement, self._pace
+        commanded, measurement, pace = self._commanded, cycle.measurement, self._pace
+        reference, goal = commanded.position, commanded.goal
         along = None if pace is None else (pace.plan_time_s, pace.feed, pace.target)
         torque = None
         if measurement is None:
-            self._writer.append(cycle.time_s, phase, along, goal, None, None, cycle.status)
+            self._writer.append(
+                cycle.time_s, phase, along, reference, goal, None, None, cycle.status
+            )
         else:
             torque = self._torque_map.torque(measurement.current_a)
             values = (
@@ -661,7 +688,14 @@ class Executor:
                 torque,
             )
             self._writer.append(
-                cycle.time_s, phase, along, goal, values, measurement.hardware_error, cycle.status
+                cycle.time_s,
+                phase,
+                along,
+                reference,
+                goal,
+                values,
+                measurement.hardware_error,
+                cycle.status,
             )
         self._update_status(phase, cycle, torque)
 

@@ -38,6 +38,7 @@ import ruckig
 
 from spm_opt.errors import InputError
 from spm_opt.evaluate import evaluate
+from spm_opt.execution.tracking import Lead, led_goals_outside
 from spm_opt.limits import RULES
 from spm_opt.problem import Problem
 from spm_opt.ruckig_local import calculate_locally
@@ -97,16 +98,27 @@ class Pace:
     target: float
 
 
-def feed_ceiling(problem: Problem, trajectory: Trajectory, most: float) -> float:
+def feed_ceiling(
+    problem: Problem, trajectory: Trajectory, most: float, lead: Lead | None = None
+) -> float:
     """The highest feed up to ``most`` (at least 1) at which the plan run that much faster
-    breaks no limit the plan itself keeps, as the evaluator judges it (to 1 %)."""
+    breaks no limit the plan itself keeps, as the evaluator judges it (to 1 %), and the
+    goals ``lead`` leads from it stay inside the joint range and the Velocity Limit."""
     if most <= 1.0:
         return most
     kept = {v.rule for v in evaluate(problem, trajectory).violations}
+    robot = problem.robot
 
     def allowed(rate: float) -> bool:
         scaled = trajectory.time_scaled(rate)
-        return {v.rule for v in evaluate(problem, scaled).violations} <= kept
+        if not {v.rule for v in evaluate(problem, scaled).violations} <= kept:
+            return False
+        if lead is None:
+            return True
+        t = scaled.time_grid()
+        states = scaled.states(t)
+        limit = robot.actuator.velocity_limit_rad_s
+        return not led_goals_outside(lead, states, t, robot.joint_range, limit)
 
     if allowed(most):
         return most

@@ -27,6 +27,8 @@ COLUMNS = (
     "plan_time_s",
     "feed",
     "feed_target",
+    "reference_theta1_rad",
+    "reference_theta2_rad",
     "goal_theta1_rad",
     "goal_theta2_rad",
     "position_theta1_rad",
@@ -44,9 +46,12 @@ COLUMNS = (
 """Columns of the CSV log. ``time_s``: when the cycle began (to the ns), the time its goal
 was sampled at; ``plan_time_s``, ``feed``, ``feed_target``: in the plan phase, how far along
 the plan (s of its own time) the goal was sampled, at what pace (1: as planned, 0: held)
-and the pace it was heading for (empty in other phases); the goals: what the actuators
-hold after the cycle (a failed write leaves the last goal delivered); measured values are
-empty in a cycle whose read failed."""
+and the pace it was heading for (empty in other phases); the references: where the
+joints are to be at the cycle's time (the plan at ``plan_time_s`` in the plan phase, the
+approach's or the stop's profile, the position held) and the goals: what the actuators
+hold after the cycle, the reference led by the position loop's lag (see
+:mod:`spm_opt.execution.tracking`; a failed write leaves the last reference and goal
+delivered); measured values are empty in a cycle whose read failed."""
 
 
 def header_path(log_path: Path) -> Path:
@@ -82,16 +87,18 @@ class LogWriter:
         time_s: float,
         phase: str,
         along: tuple[float, float, float] | None,
+        reference: np.ndarray,
         goal: np.ndarray,
         measured: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
         hardware_error: tuple[int, int] | None,
         status: str,
     ) -> None:
-        """One sample: ``along`` is (plan time, feed, feed target) or None, ``measured``
-        (position, velocity, current, torque) or None."""
+        """One sample: ``along`` is (plan time, feed, feed target) or None, ``reference``
+        and ``goal`` positions (rad), ``measured`` (position, velocity, current, torque) or
+        None."""
         values = [f"{time_s:.9f}", phase]
         values += ["", "", ""] if along is None else [f"{v:.12g}" for v in along]
-        values += [f"{v:.9g}" for v in goal]
+        values += [f"{v:.9g}" for v in (*reference, *goal)]
         if measured is None:
             values += [""] * 8
         else:

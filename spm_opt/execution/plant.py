@@ -188,7 +188,7 @@ class DynamixelPlant:
         self._integral = np.zeros(2)
         self.goal_position_rad = start + robot.encoder_offset  # in the encoders' reading
         self.torque_enabled = np.zeros(2, dtype=bool)
-        self.velocity_limit_rad_s = np.full(2, actuator.rate(8000))
+        self.velocity_limit_rad_s = np.full(2, actuator.velocity_limit_rad_s)
         self.current_limit_a = np.full(2, actuator.continuous_current_a * 1.5)
         self.position_p_gain = np.full(2, DEFAULT_POSITION_P_GAIN, dtype=np.int64)
         self.velocity_p_gain = np.full(2, DEFAULT_VELOCITY_P_GAIN, dtype=np.int64)

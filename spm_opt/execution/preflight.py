@@ -21,6 +21,10 @@ Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this or
    :mod:`spm_opt.limits` says judges the robot (joint range, speed, acceleration, jerk,
    torque, current, singularity). The cut's own figures are the planner's business.
 4. **Starting inside the joint range.**
+5. **Led goals the actuators take.** The goals the executor sends lead the plan by the
+   position loop's lag (:mod:`spm_opt.execution.tracking`): they must stay inside the
+   joint range, and move no faster than the actuators' Velocity Limit, at 100 % feed
+   (the feed ceiling keeps them so above it).
 
 A CSV whose samples are not those its sidecar records never gets this far:
 :meth:`~spm_opt.trajectory.Trajectory.from_csv` refuses it.
@@ -36,6 +40,7 @@ import numpy as np
 from spm_opt.errors import PreflightError
 from spm_opt.evaluate import evaluate
 from spm_opt.execution.feed import JointLimits
+from spm_opt.execution.tracking import Lead, led_goals_outside
 from spm_opt.limits import ROBOT, RULES
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
@@ -51,6 +56,7 @@ def check_plan(
     trajectory: Trajectory,
     limits: JointLimits,
     period_s: float,
+    lead: Lead,
     other_problem: bool = False,
 ) -> None:
     """Refuse ``trajectory`` for ``problem`` (see the module's docstring); a plan let
@@ -64,6 +70,8 @@ def check_plan(
         The limits every commanded motion keeps (rad/s, rad/s², rad/s³).
     period_s : float, s
         The control period.
+    lead : Lead
+        How the goals lead the plan.
     other_problem : bool
         Run a plan made for another problem, or recording none, under ``problem``'s limits.
     """
@@ -80,6 +88,16 @@ def check_plan(
     low, high = problem.robot.joint_range[:, 0], problem.robot.joint_range[:, 1]
     if np.any(start < low) or np.any(start > high):
         raise PreflightError(f"plan refused: its start {degrees(start)} is out of range")
+    t = trajectory.time_grid()
+    outside = led_goals_outside(
+        lead,
+        trajectory.states(t),
+        t,
+        problem.robot.joint_range,
+        problem.robot.actuator.velocity_limit_rad_s,
+    )
+    if outside:
+        raise PreflightError(f"plan refused: {outside} (use --tracking none, or plan slower)")
     if allowed:
         _LOG.warning("%s; run under %s's limits as asked (--other-problem)", allowed, problem.name)
 

@@ -19,6 +19,10 @@ import numpy as np
 RPM = 2.0 * math.pi / 60.0
 """One revolution per minute in rad/s."""
 
+VELOCITY_LIMIT_UNITS = 8000
+"""The control table's default Velocity Limit (address 32), velocity units: the largest
+rate command the position loop gives (15.9 rpm on the L54)."""
+
 
 @dataclass(frozen=True)
 class CurrentTorqueMap:
@@ -76,6 +80,14 @@ class Actuator:
     coulomb_friction_nm : pair of float
         Coulomb friction of each joint at the output (the gear train's), N·m; 0 by
         default.
+    position_loop_gain_per_s : pair of float
+        The integrated position loop of each joint, 1/s: the P gain from position error to
+        rate command, in physical units (a joint that follows a ramp at q̇ lags it by
+        q̇ / gain). The executor leads its goals by this lag.
+    velocity_loop_bandwidth_per_s : pair of float
+        The closed velocity loop's bandwidth of each joint, 1/s (the rate follows its
+        command as a first-order lag of this rate): a joint accelerating at q̈ lags a
+        further q̈ / (position gain × bandwidth).
     """
 
     model: str
@@ -92,6 +104,13 @@ class Actuator:
     gear_efficiency: float = 1.0
     viscous_friction_nm_s_rad: tuple[float, float] = (0.0, 0.0)
     coulomb_friction_nm: tuple[float, float] = (0.0, 0.0)
+    position_loop_gain_per_s: tuple[float, float] = (32.0, 32.0)
+    velocity_loop_bandwidth_per_s: tuple[float, float] = (150.0, 150.0)
+
+    @property
+    def velocity_limit_rad_s(self) -> float:
+        """The default Velocity Limit at the output, rad/s."""
+        return float(self.rate(VELOCITY_LIMIT_UNITS))
 
     def pulses(self, angle_rad: np.ndarray) -> np.ndarray:
         """Goal/present position units (pulses, rounded) for angles in rad."""

@@ -289,9 +289,21 @@ def _actuator(table: Table) -> Actuator:
                 "coulomb_friction_nm", length=2, minimum=0.0, maximum=10.0, default=np.zeros(2)
             ).tolist()
         ),
+        position_loop_gain_per_s=_loop_rates(
+            table, "position_loop_gain_per_s", datasheet.position_loop_gain_per_s
+        ),
+        velocity_loop_bandwidth_per_s=_loop_rates(
+            table, "velocity_loop_bandwidth_per_s", datasheet.velocity_loop_bandwidth_per_s
+        ),
     )
     table.finish()
     return actuator
+
+
+def _loop_rates(table: Table, key: str, default: tuple[float, float]) -> tuple[float, float]:
+    """A pair of loop rates, 1/s, each in [1, 10,000]."""
+    values = table.vector(key, length=2, minimum=1.0, maximum=10_000.0, default=np.array(default))
+    return (float(values[0]), float(values[1]))
 
 
 def robot_toml(robot: Robot, name: str, description: str = "") -> str:
@@ -326,5 +338,7 @@ def robot_toml(robot: Robot, name: str, description: str = "") -> str:
         "gear_efficiency": actuator.gear_efficiency,
         "viscous_friction_nm_s_per_rad": list(actuator.viscous_friction_nm_s_rad),
         "coulomb_friction_nm": list(actuator.coulomb_friction_nm),
+        "position_loop_gain_per_s": list(actuator.position_loop_gain_per_s),
+        "velocity_loop_bandwidth_per_s": list(actuator.velocity_loop_bandwidth_per_s),
     }
     return tomli_w.dumps(document)

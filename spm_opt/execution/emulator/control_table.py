@@ -13,6 +13,7 @@ from spm_opt.execution.protocol import (
     MAX_ID,
     ErrorCode,
 )
+from spm_opt.model.actuator import VELOCITY_LIMIT_UNITS
 
 MODEL_NUMBER = 38152
 """Model number of the L54-50-S500-R (0x9508)."""
@@ -58,7 +59,7 @@ MODEL_NUMBER_ITEM = Item(0, 2, "Model Number", False, 0, 65535, MODEL_NUMBER)
 FIRMWARE_ITEM = Item(6, 1, "Firmware Version", False, 0, 255, FIRMWARE_VERSION)
 ID_ITEM = Item(7, 1, "ID", True, 0, MAX_ID, 1)
 TORQUE_LIMIT = Item(30, 2, "Torque Limit", True, 0, 32767)
-VELOCITY_LIMIT = Item(32, 4, "Velocity Limit", True, 0, _INT32[1], 8000)
+VELOCITY_LIMIT = Item(32, 4, "Velocity Limit", True, 0, _INT32[1], VELOCITY_LIMIT_UNITS)
 MAX_POSITION_LIMIT = Item(36, 4, "Max Position Limit", True, *_INT32, 180_692)
 MIN_POSITION_LIMIT = Item(40, 4, "Min Position Limit", True, *_INT32, -180_692)
 TORQUE_ENABLE = Item(562, 1, "Torque Enable", True, 0, 1)

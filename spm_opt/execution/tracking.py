@@ -1,0 +1,110 @@
+"""Goals that lead the position loop's lag, and the following error a run may show.
+
+The L54's firmware takes goal positions only: no feed-forward input, no position I or D
+term. Its P position loop (gain Kp, 1/s) turns the position error into a rate command,
+which the PI velocity loop follows roughly as a first-order lag of bandwidth ωv (1/s). A
+joint driven by goals equal to the plan lags it by q̇/Kp (2.6° at the L54's continuous
+speed with Kp = 32 1/s). To make the joint follow the reference q(t) instead, the goal is
+the two loops' inverse,
+
+    g = q + q̇/Kp + q̈/(Kp ωv),
+
+sampled half a control period T ahead, since each goal is held for a period:
+g(t + T/2) ≈ g + (q̇ + q̈/Kp) T/2. The loop's parameters are the actuator's, from the
+robot file (``position_loop_gain_per_s``, ``velocity_loop_bandwidth_per_s``; ``spm-opt
+identify`` estimates them from a log).
+
+The following error is the measured position less the reference (the plan at the logged
+plan time), and it may grow with the commanded speed, as LinuxCNC's does:
+``max(min_error, max_error × |q̇| / q̇_limit)`` per joint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from spm_opt.limits import RULES
+from spm_opt.model.actuator import Actuator
+
+TRACKING_MODES = ("lead", "none")
+"""``lead``: goals lead the loop's lag; ``none``: the goal is the reference itself."""
+
+
+@dataclass(frozen=True)
+class Lead:
+    """The goal for a reference state: g = q + ``rate_s`` q̇ + ``acceleration_s2`` q̈.
+
+    Attributes
+    ----------
+    rate_s : ndarray, shape (2,), s
+    acceleration_s2 : ndarray, shape (2,), s²
+    """
+
+    rate_s: np.ndarray
+    acceleration_s2: np.ndarray
+
+    @classmethod
+    def for_actuator(cls, actuator: Actuator, period_s: float, mode: str) -> Lead:
+        """The lead of ``actuator``'s loops for goals held ``period_s`` (s) each; ``mode``
+        "none" leads by nothing."""
+        if mode not in TRACKING_MODES:
+            raise ValueError(f"tracking = {mode!r}: expected one of {', '.join(TRACKING_MODES)}")
+        if mode == "none":
+            return cls(np.zeros(2), np.zeros(2))
+        position = np.asarray(actuator.position_loop_gain_per_s, dtype=float)
+        velocity = np.asarray(actuator.velocity_loop_bandwidth_per_s, dtype=float)
+        half = 0.5 * period_s
+        return cls(1.0 / position + half, 1.0 / (position * velocity) + half / position)
+
+    def goal(self, position: np.ndarray, rate: np.ndarray, acceleration: np.ndarray) -> np.ndarray:
+        """Goal positions, rad, for reference positions (rad), rates (rad/s) and
+        accelerations (rad/s²); any leading shape (…, 2)."""
+        return position + self.rate_s * rate + self.acceleration_s2 * acceleration
+
+    def goal_rate(self, rate: np.ndarray, acceleration: np.ndarray, jerk: np.ndarray) -> np.ndarray:
+        """The goals' rate of change, rad/s, along a reference with these derivatives."""
+        return rate + self.rate_s * acceleration + self.acceleration_s2 * jerk
+
+
+def following_error_limit(
+    reference_rate: np.ndarray, speed_limit: float, least: float, most: float
+) -> np.ndarray:
+    """The following error allowed per joint, rad: ``least`` at rest, growing in
+    proportion to the reference's speed to ``most`` at ``speed_limit`` (rad/s)."""
+    return np.maximum(least, most * np.abs(reference_rate) / speed_limit)
+
+
+def led_goals_outside(
+    lead: Lead,
+    states: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    times: np.ndarray,
+    joint_range: np.ndarray,
+    velocity_limit: float,
+) -> str:
+    """Why the goals led from a reference leave the joint range or outrun the actuators'
+    Velocity Limit ("" if they do neither). ``states``: positions, rates, accelerations
+    and jerks (n, 2) at ``times`` (s); ``joint_range`` (2, 2), rad; ``velocity_limit``,
+    rad/s, allowed the evaluator's 0.5 %."""
+    position, rate, acceleration, jerk = states
+    goals = lead.goal(position, rate, acceleration)
+    for joint in range(2):
+        low, high = joint_range[joint]
+        beyond = np.maximum(low - goals[:, joint], goals[:, joint] - high)
+        worst = int(np.argmax(beyond))
+        if beyond[worst] > 0.0:
+            return (
+                f"theta{joint + 1}'s led goal {np.degrees(goals[worst, joint]):.3f} deg at "
+                f"t = {times[worst]:.3f} s is out of the joint range "
+                f"[{np.degrees(low):g}, {np.degrees(high):g}] deg"
+            )
+    goal_rate = np.abs(lead.goal_rate(rate, acceleration, jerk))
+    worst_sample, joint = np.unravel_index(int(np.argmax(goal_rate)), goal_rate.shape)
+    if goal_rate[worst_sample, joint] > RULES["joint speed"].allowed(velocity_limit):
+        return (
+            f"theta{joint + 1}'s led goal moves at {goal_rate[worst_sample, joint]:.3f} rad/s "
+            f"at t = {times[worst_sample]:.3f} s, beyond the actuators' Velocity Limit "
+            f"{velocity_limit:.3f} rad/s"
+        )
+    return ""
