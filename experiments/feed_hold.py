@@ -1,4 +1,5 @@
-"""How far and how long a feed hold from full feed takes on the paper's plan.
+"""How far and how long a feed hold from full feed takes: on the paper's plan, and on the
+time-optimal plans of the hardware problem (the planners keep a hold its room there).
 
 The paper's plan (the cubic via-point trajectory of Tables II–III, 10 s per segment,
 40 s) runs on the simulated robot whose plant is not the planning model
@@ -18,9 +19,15 @@ Measured for each hold, from the log and the plant's true state (its trace):
 - rest confirmed: from the request to the executor's proof of rest (its rest window), s;
 - off the path: the true cut's largest distance from the plan's cut, request to resume, mm.
 
-    python experiments/feed_hold.py [--holds 20] [--out DIR]
+The same holds, spread over all but the last 0.5 s of each, on toppra's and ocp-min-time's
+plans of problems/craniotomy_hardware.toml (made for it: at its joint limits less the room
+a hold within its ``hold_within_s`` needs, :mod:`spm_opt.hold_room`), summed up as the
+least, median and largest time to rest.
 
-writes DIR/feed_hold.md, feed_hold.json and feed_hold.png (default docs/feed_hold).
+    python experiments/feed_hold.py [--holds 20] [--optimal-holds N] [--out DIR]
+
+writes DIR/feed_hold.md, feed_hold.json (the paper's plan), feed_hold_optimal.json (the
+time-optimal plans, by planner) and feed_hold.png (default docs/feed_hold).
 """
 
 from __future__ import annotations
@@ -47,6 +54,7 @@ PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
 LIMITS = ROOT / "problems" / "craniotomy_hardware.toml"
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 RESUME_AFTER_S = 1.5
+TIME_OPTIMAL = ("toppra", "ocp-min-time")
 SETTINGS = ExecutionSettings(other_problem=True)
 """The paper's plan is made for the paper's problem, whose jerk limit its acceleration step
 from rest breaks; it runs here under craniotomy_hardware.toml's limits (the same landmarks
@@ -130,7 +138,39 @@ COLUMNS = (
 )
 
 
-def report(rows: list[dict]) -> str:
+SUMMED = (
+    ("feed to 0, s", "feed_to_zero_s", "{:.2f}"),
+    ("true rest, s", "true_rest_s", "{:.2f}"),
+    ("goal's stop, mm", "goal_stop_mm", "{:.2f}"),
+    ("off the path, mm", "off_path_mm", "{:.3f}"),
+)
+
+
+def optimal_report(problem: so.Problem, optimal: dict[str, tuple[float, list[dict]]]) -> list[str]:
+    """The time-optimal plans' holds: least / median / largest of each figure."""
+    table = []
+    for name, (duration, rows) in optimal.items():
+        figures = [
+            " / ".join(fmt.format(f([r[key] for r in rows])) for f in (np.min, np.median, np.max))
+            for _, key, fmt in SUMMED
+        ]
+        done = all(r["completed"] for r in rows)
+        table.append([name, f"{duration:.2f}", f"{len(rows)} ({done})", *figures])
+    return [
+        "## Holds on the time-optimal plans of the hardware problem",
+        "",
+        f"The same holds on the plans of {' and '.join(optimal)} for craniotomy_hardware.toml "
+        f"(hold_within_s = {problem.limits.hold_within_s:g} s), spread over all but the "
+        "last 0.5 s of each; least / median / largest:",
+        "",
+        *markdown_table(
+            ["plan", "duration, s", "holds (all completed)", *(c[0] for c in SUMMED)], table
+        ),
+        "",
+    ]
+
+
+def report(rows: list[dict], optimal: list[str]) -> str:
     table = [[fmt.format(row[key]) for _, key, fmt in COLUMNS] for row in rows]
     summary = [
         [name, *(fmt.format(f(np.array([r[key] for r in rows]))) for _, key, fmt in COLUMNS[1:])]
@@ -149,6 +189,7 @@ def report(rows: list[dict]) -> str:
             "",
             *markdown_table(["", *(c[0] for c in COLUMNS[1:])], summary),
             "",
+            *optimal,
         ]
     )
 
@@ -176,6 +217,9 @@ def figure(rows: list[dict]):
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--holds", type=int, default=20, help="number of runs, one hold each")
+    parser.add_argument(
+        "--optimal-holds", type=int, help="runs on each time-optimal plan (default: --holds)"
+    )
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "feed_hold")
     args = parser.parse_args()
     plan = so.plan(so.load_problem(PAPER), "cubic")
@@ -187,10 +231,26 @@ def main() -> int:
             hold_s = (k + 0.5) / args.holds * plan.duration
             rows.append(one_hold(problem, plan, plant, hold_s, Path(scratch) / f"{k}.csv"))
             print(f"hold {k + 1}/{args.holds} at {hold_s:.1f} s", file=sys.stderr, flush=True)
+        optimal, count = {}, args.optimal_holds or args.holds
+        for name in TIME_OPTIMAL:
+            fast = so.plan(problem, name)
+            times = (np.arange(count) + 0.5) / count
+            optimal[name] = (
+                fast.duration,
+                [
+                    one_hold(problem, fast, plant, hold_s, Path(scratch) / f"{name}{k}.csv")
+                    for k, hold_s in enumerate(times * (fast.duration - 0.5))
+                ],
+            )
+            print(f"{count} holds on {name}'s plan", file=sys.stderr, flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     files = {
-        args.out / "feed_hold.md": report(rows),
+        args.out / "feed_hold.md": report(rows, optimal_report(problem, optimal)),
         args.out / "feed_hold.json": json.dumps(rows, indent=2) + "\n",
+        args.out / "feed_hold_optimal.json": json.dumps(
+            {name: held for name, (_, held) in optimal.items()}, indent=2
+        )
+        + "\n",
         args.out / "feed_hold.png": to_png(figure(rows)),
     }
     write_atomically(files)

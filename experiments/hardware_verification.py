@@ -6,7 +6,9 @@ not the planning model (problems/robots/prototype_plant.toml: other masses, fric
 drive losses and encoder zeros, as a real prototype would have), and compares what was
 measured with the model: torques from the actuators' current against the Lagrange model
 (Figs. 19–20), measured against planned joint paths (Fig. 15), and the platform's path
-from a synthetic motion capture, registered on 8 landmarks (Figs. 25–26).
+from a synthetic motion capture, registered on 8 landmarks (Figs. 25–26). The executed
+cut is judged by the problem's rules, from the measured angles and from the plant's true
+state (``true_state.npz``, saved beside the log).
 
     python experiments/hardware_verification.py [--backend sim|emulator] [--plant-robot FILE]
                                                 [--out DIR]
@@ -51,6 +53,7 @@ def main() -> int:
     start = trajectory.position(trajectory.start_time)
     settings = ExecutionSettings(rate_hz=args.rate)
     log = args.out / "run.csv"
+    trace = args.out / "true_state.npz"
     args.out.mkdir(parents=True, exist_ok=True)
     print(
         f"running {args.planner} ({trajectory.duration:.1f} s) on {args.backend}", file=sys.stderr
@@ -59,17 +62,19 @@ def main() -> int:
         plant = load_robot(args.plant_robot)
         backend = SimulatedRobot(problem.robot, start_rad=start, plant_robot=plant)
         result = execute(trajectory, backend, problem, log, settings)
+        backend.trace.save(trace)
     else:
         from spm_opt.execution.dynamixel import DynamixelRobot
         from spm_opt.execution.emulator import spawn_emulator
 
         with spawn_emulator(
-            args.plant_robot, start_deg=np.degrees(start), seed=args.seed
+            args.plant_robot, start_deg=np.degrees(start), seed=args.seed, trace_path=trace
         ) as emulator:
             backend = DynamixelRobot(problem.robot.actuator, emulator.device)
             result = execute(trajectory, backend, problem, log, settings)
     print(f"{result.reason}: {result.samples} samples", file=sys.stderr)
-    for path in [log, *write_verification(problem, trajectory, log, args.out, args.seed)]:
+    written = write_verification(problem, trajectory, log, args.out, args.seed, trace)
+    for path in [log, trace, *written]:
         print(path)
     return 0 if result.succeeded else 1
 

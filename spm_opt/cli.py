@@ -97,7 +97,9 @@ def _parser() -> argparse.ArgumentParser:
     )
 
     identify = commands.add_parser(
-        "identify", help="identify the robot's parameters from execution logs (a robot TOML)"
+        "identify",
+        help="identify the robot's parameters and its actuators' loops from execution logs "
+        "(a robot TOML)",
     )
     identify.add_argument("logs", nargs="+", type=Path, help="execution log CSV files")
     identify.add_argument(
@@ -120,10 +122,26 @@ def _parser() -> argparse.ArgumentParser:
         "--min-speed", type=float, default=0.02, metavar="RAD_S", help="slower samples left out"
     )
 
-    evaluate = commands.add_parser("evaluate", help="measure a trajectory CSV against a problem")
+    evaluate = commands.add_parser(
+        "evaluate", help="judge a trajectory CSV, or the run an execution log records, by a problem"
+    )
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
-    evaluate.add_argument("trajectory", type=Path, help="trajectory CSV file")
+    evaluate.add_argument(
+        "trajectory", type=Path, help="trajectory CSV file, or execution log CSV (spm-opt execute)"
+    )
     evaluate.add_argument("--json", action="store_true", help="print the report as JSON")
+    evaluate.add_argument(
+        "--trace",
+        type=Path,
+        metavar="FILE",
+        help="the plant's true state over the logged run (.npz, from spm-opt execute --backend "
+        "sim --trace or spm-opt emulate --trace): the true cut is judged too",
+    )
+    evaluate.add_argument(
+        "--other-problem",
+        action="store_true",
+        help="judge a log under PROBLEM though it ran under another",
+    )
     for command in commands.choices.values():
         # -v after the command as well; SUPPRESS keeps a -v given before it
         command.add_argument(
@@ -409,12 +427,31 @@ def _plan(args: argparse.Namespace) -> None:
 
 def _evaluate(args: argparse.Namespace) -> None:
     from spm_opt.evaluate import evaluate
+    from spm_opt.evaluate_execution import evaluate_log, is_execution_log
     from spm_opt.problem import load_problem
     from spm_opt.trajectory import Trajectory
 
     problem = load_problem(args.problem)
-    report = evaluate(problem, Trajectory.from_csv(args.trajectory))
-    print(json.dumps(report.to_dict(), indent=2) if args.json else report.to_markdown(), end="")
+    if is_execution_log(args.trajectory):
+        reports = evaluate_log(
+            problem, args.trajectory, args.trace, other_problem=args.other_problem
+        )
+        judged = {"measured": reports.measured, "true": reports.true}
+    else:
+        trajectory = Trajectory.from_csv(args.trajectory)
+        for option, given in (("--trace", args.trace), ("--other-problem", args.other_problem)):
+            if given:
+                raise InputError(f"{option}: only with an execution log, not a trajectory CSV")
+        judged = {"planned": evaluate(problem, trajectory)}
+    judged = {name: report for name, report in judged.items() if report is not None}
+    if len(judged) == 1:
+        (report,) = judged.values()
+        print(json.dumps(report.to_dict(), indent=2) if args.json else report.to_markdown(), end="")
+    elif args.json:
+        print(json.dumps({name: report.to_dict() for name, report in judged.items()}, indent=2))
+    else:
+        cuts = [f"## The {name} cut\n\n{report.to_markdown()}" for name, report in judged.items()]
+        print("\n".join(cuts), end="")
 
 
 def _identify(args: argparse.Namespace) -> None:
@@ -426,6 +463,7 @@ def _identify(args: argparse.Namespace) -> None:
         report_markdown,
         robot_file_text,
     )
+    from spm_opt.identify_loop import estimate_loops, goal_rms
     from spm_opt.identify_samples import log_samples
     from spm_opt.plots import to_png
     from spm_opt.problem import load_problem
@@ -436,18 +474,22 @@ def _identify(args: argparse.Namespace) -> None:
     settings = (args.cutoff_hz, args.decimation, args.min_speed)
     samples = log_samples(args.logs, *settings)
     identification = identify(problem.robot, samples)
+    loops = estimate_loops(args.logs, problem.robot)
     validation = samples if args.validate is None else log_samples([args.validate], *settings)
     on = "the fitted logs" if args.validate is None else f"{args.validate.name} (not fitted)"
     prior = prediction_rms(problem.robot, validation)
     identified = prediction_rms(identification.robot, validation)
     figure = prediction_figure(problem.robot, identification.robot, validation)
+    goal_logs = args.logs if args.validate is None else [args.validate]
+    goals = [goal_rms(goal_logs, robot) for robot in (problem.robot, loops.robot(problem.robot))]
     actuator = problem.robot.actuator
     unit = actuator.current_unit_a  # one Present Current unit, A
+    report = report_markdown(
+        identification, prior, identified, on, float(actuator.current_map.torque(unit))
+    )
     files = {
-        args.out: robot_file_text(identification, args.out.stem),
-        args.out.with_suffix(".md"): report_markdown(
-            identification, prior, identified, on, float(actuator.current_map.torque(unit))
-        ),
+        args.out: robot_file_text(identification, loops, args.out.stem),
+        args.out.with_suffix(".md"): "\n".join([report, *loops.markdown(*goals, on), ""]),
         args.out.with_suffix(".png"): to_png(figure),
     }
     write_atomically(files)
@@ -456,6 +498,12 @@ def _identify(args: argparse.Namespace) -> None:
     print(
         f"torque prediction RMS on {on}: prior {prior[0]:.4f}, {prior[1]:.4f} N·m; "
         f"identified {identified[0]:.4f}, {identified[1]:.4f} N·m",
+        file=sys.stderr,
+    )
+    print(
+        f"actuator loops: position_loop_gain_per_s {loops.gain_per_s[0]:.4g}, "
+        f"{loops.gain_per_s[1]:.4g}; velocity_loop_bandwidth_per_s "
+        f"{loops.bandwidth_per_s[0]:.4g}, {loops.bandwidth_per_s[1]:.4g} (1/s)",
         file=sys.stderr,
     )
 

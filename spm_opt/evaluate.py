@@ -5,9 +5,15 @@ how much the evaluator allows beyond it is :mod:`spm_opt.limits`' table: 0.5 % o
 rate-type limit, nothing beyond the joint range and the singularity margin. Besides the
 limits, a clean plan cuts the contour: it visits every landmark in order within the path
 tolerance (the contour tolerance), sweeps the whole contour inside the tube with no
-stretch left out, and never backtracks along it by more than the path tolerance. A plan
+stretch left out, and never backtracks along it by more than the path tolerance. A plan's
+tube is the contour tolerance less the problem's execution reserve, an executed cut's the
+whole (:func:`spm_opt.limits.contour_tube`). A plan
 whose metadata say ``ignores_contour`` (an excitation plan for identification) is judged
 by the robot's limits alone: its cut figures are measured, not judged.
+
+One function, :func:`judge`, judges a motion sampled on a grid (:class:`Motion`): a plan's
+here, an executed run's (its log, and the plant's true state) in
+:mod:`spm_opt.evaluate_execution`.
 
 A trajectory measured once is not measured again for the same problem object, rate and
 landmark times while it lives: a planner that checks its own plan (the optimal-control
@@ -21,13 +27,15 @@ import copy
 import dataclasses
 import weakref
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from spm_opt.bounds import duration_lower_bound
 from spm_opt.contour import direction_rates
-from spm_opt.limits import ROBOT, RULES, path_tolerance
+from spm_opt.hold_room import hold_checks
+from spm_opt.limits import ROBOT, RULES, contour_tube, path_tolerance
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
@@ -70,7 +78,8 @@ class Report:
     limits allow along the contour (:mod:`spm_opt.bounds`). ``max_acceleration_step_rad_s2``
     is the largest jump of q̈ (from rest at the start, to rest at the end, or between
     pieces): an unbounded jerk that the polynomials' own jerk does not show; with a jerk
-    limit, a step larger than what that jerk reaches in one grid interval is a violation.
+    limit, a step larger than what that jerk reaches in one grid interval is a violation
+    (None, "—": not measured, as of an executed run, whose smoothed jerk shows any step).
     """
 
     planner: str | None
@@ -79,7 +88,7 @@ class Report:
     joint_speed_limit_rad_s: float
     peak_joint_acceleration_rad_s2: list[float]
     rms_jerk_rad_s3: list[float]
-    max_acceleration_step_rad_s2: list[float]
+    max_acceleration_step_rad_s2: list[float] | None
     max_contour_deviation_mm: float
     rms_contour_deviation_mm: float
     max_tool_speed_mm_s: float
@@ -123,9 +132,7 @@ class Report:
                     _format(visit["error_mm"]),
                 )
             )
-        lines = [*markdown_table(("figure", "value"), rows), ""]
-        if not self.contour_judged:
-            lines.append("The plan ignores the contour: only the robot's limits are judged.")
+        lines = [*markdown_table(("figure", "value"), rows), "", *self._notes()]
         if self.violations:
             lines.append(f"**{len(self.violations)} violation(s):**")
             lines += [f"- {v}" for v in self.violations]
@@ -133,8 +140,16 @@ class Report:
             lines.append("No limit is violated.")
         return "\n".join(lines) + "\n"
 
+    def _notes(self) -> list[str]:
+        """Lines between the table and the violations."""
+        if self.contour_judged:
+            return []
+        return ["The plan ignores the contour: only the robot's limits are judged."]
+
 
 def _format(value: Any) -> str:
+    if value is None:
+        return "—"
     if isinstance(value, list):
         return ", ".join(_format(v) for v in value)
     if isinstance(value, float):
@@ -159,16 +174,35 @@ _MEASURED: weakref.WeakKeyDictionary[Trajectory, tuple[Problem, tuple, Report]] 
 times) it was measured at."""
 
 
-def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_RATE_HZ) -> Report:
+def evaluate(
+    problem: Problem,
+    trajectory: Trajectory | str | Path,
+    rate_hz: float = DEFAULT_RATE_HZ,
+    *,
+    other_problem: bool = False,
+) -> Report:
     """Measure ``trajectory`` against ``problem`` on a grid at ``rate_hz`` (with breakpoints).
 
     Parameters
     ----------
     problem : Problem
-    trajectory : Trajectory
+    trajectory : Trajectory, or the path of a trajectory CSV or of an execution log CSV
+        A log is judged on its own samples from the plan's start on, by the same rules
+        (:func:`spm_opt.evaluate_execution.evaluate_log`, which also judges the plant's
+        true state); its report is an :class:`~spm_opt.evaluate_execution.ExecutionReport`.
     rate_hz : float
-        Sampling rate of the evaluation grid, Hz (default 1 kHz).
+        Sampling rate of the evaluation grid, Hz (default 1 kHz; a log keeps its own).
+    other_problem : bool
+        Judge a log under ``problem`` though it ran under another.
     """
+    if isinstance(trajectory, str | Path):
+        from spm_opt import evaluate_execution  # it builds on this module
+
+        if evaluate_execution.is_execution_log(trajectory):
+            return evaluate_execution.evaluate_log(
+                problem, trajectory, other_problem=other_problem
+            ).measured
+        trajectory = Trajectory.from_csv(trajectory)
     landmark_times = trajectory.landmark_times
     inputs = (rate_hz, None if landmark_times is None else tuple(landmark_times))
     known = _MEASURED.get(trajectory)
@@ -180,28 +214,138 @@ def evaluate(problem: Problem, trajectory: Trajectory, rate_hz: float = DEFAULT_
     return copy.deepcopy(report)
 
 
+@dataclass(frozen=True)
+class Motion:
+    """A motion sampled at times ``t`` (N,), s, and what drove it; per-joint arrays (N, 2).
+
+    Attributes
+    ----------
+    t : ndarray, s
+    q, qd, qdd, jerk : ndarray, rad, rad/s, rad/s², rad/s³
+    torque : ndarray, N·m
+        The torque the actuators delivered.
+    current : ndarray, A
+        The motor current it took.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    jerk: np.ndarray
+    torque: np.ndarray
+    current: np.ndarray
+
+
+@dataclass(frozen=True)
+class Steps:
+    """Jumps of q̈ the samples cannot show: at ``times`` (K,), s, ``values`` (K, 2),
+    rad/s², judged against ``limit`` (rad/s², the jerk a grid interval allows; None: not
+    limited)."""
+
+    times: np.ndarray
+    values: np.ndarray
+    limit: float | None
+
+
+@dataclass(frozen=True)
+class Claimed:
+    """Where a motion says it visits each landmark: ``times`` (visits,), s, and the unit
+    ``directions`` (visits, 3) of the cut then."""
+
+    times: np.ndarray
+    directions: np.ndarray
+
+
 def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report:
     """:func:`evaluate`'s measurement, every time."""
-    robot, limits, contour = problem.robot, problem.limits, problem.contour
+    robot = problem.robot
     t = trajectory.time_grid(rate_hz)
     q, qd, qdd, jerk = trajectory.states(t)
+    torque = dynamics.actuator_torque(robot, q, qd, qdd)
+    current = robot.actuator.current_map.current(torque)
+    step_times, steps = trajectory.acceleration_steps()
+    jerk_limit = problem.limits.max_joint_jerk
+    claimed = trajectory.landmark_times
+    visits = None
+    if claimed is not None and len(claimed) == len(problem.visit_order):
+        directions = [
+            kinematics.forward_kinematics(trajectory.position([time]), 1.0)[0] for time in claimed
+        ]
+        visits = Claimed(claimed, np.array(directions))
+    report = judge(
+        problem,
+        Motion(t, q, qd, qdd, jerk, torque, current),
+        contour_tube(problem),
+        path_tolerance(problem),
+        planner=trajectory.metadata.get("planner"),
+        duration=trajectory.duration,
+        steps=Steps(step_times, steps, None if jerk_limit is None else jerk_limit / rate_hz),
+        claimed=visits,
+        contour_judged=not trajectory.metadata.get("ignores_contour", False),
+    )
+    if not report.contour_judged:
+        return report
+    checks = _Checks(t)  # a plan's room for a feed hold: judged of plans, not of runs
+    for rule, label, values, limit in hold_checks(problem, qd, qdd, jerk):
+        checks.upper(rule, label, values, limit)
+    return dataclasses.replace(report, violations=report.violations + checks.found)
+
+
+def judge(
+    problem: Problem,
+    motion: Motion,
+    tube: float | None,
+    path: float,
+    *,
+    planner: str | None,
+    duration: float,
+    steps: Steps | None = None,
+    claimed: Claimed | None = None,
+    feed: np.ndarray | None = None,
+    between_samples: bool = False,
+    contour_judged: bool = True,
+) -> Report:
+    """Judge a sampled motion by every rule of :data:`spm_opt.limits.RULES`: the one
+    judgement of a plan and of an executed run.
+
+    Parameters
+    ----------
+    problem : Problem
+    motion : Motion
+    tube : float or None, m
+        The contour tolerance the cut is judged against (None: not checked).
+    path : float, m
+        The path tolerance of the landmark visits, coverage and backtracking.
+    planner : str or None
+    duration : float, s
+        The motion's duration, for the report and the lower bound's ratio.
+    steps : Steps, optional
+        Jumps of q̈ between samples (None: not measured).
+    claimed : Claimed, optional
+        The landmark visits the motion claims (None: each is searched for on the samples).
+    feed : ndarray (N,), optional
+        The pace in force at each sample: the tool speed limit is the problem's times it.
+    between_samples : bool
+        A searched landmark visit may fall between two samples: its error is the
+        distance to the straight segments from the nearest sample to its neighbours.
+    contour_judged : bool
+        False: the cut's figures are measured, not judged (an excitation plan).
+    """
+    robot, limits, contour = problem.robot, problem.limits, problem.contour
+    t, q, qd, qdd, jerk = motion.t, motion.q, motion.qd, motion.qdd, motion.jerk
+    torque, current = motion.torque, motion.current
     directions = kinematics.forward_kinematics(q, 1.0)
     near = contour.nearest(directions)
     deviation = contour.chord(near)
     tool_speed = contour.tool_speed(directions, direction_rates(q, qd), near)
     margins = kinematics.singularity_margins(q)
-    torque = dynamics.actuator_torque(robot, q, qd, qdd)
-    current = robot.actuator.current_map.current(torque)
     torque_limit = problem.max_joint_torque
     peak_torque = _peaks(torque)
     peak_current = _peaks(current)
-    duration = t[-1] - t[0]
     mean_speed = float(_time_mean(tool_speed, t))
     speed_std = float(np.sqrt(_time_mean((tool_speed - mean_speed) ** 2, t)))
     lower_bound = duration_lower_bound(problem)
-    step_times, steps = trajectory.acceleration_steps()
-    path = path_tolerance(problem)
-    tube = limits.contour_tolerance
     in_tube = (
         np.ones(len(t), bool)
         if tube is None
@@ -210,7 +354,7 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
     progress = contour.progress(near)
     gap, gap_at = _largest_gap(progress, in_tube, contour.length)
     backtrack = np.maximum.accumulate(progress) - progress
-    landmark_errors = _landmark_errors(problem, trajectory, t, directions, path)
+    landmark_errors = _landmark_errors(problem, claimed, t, directions, path, between_samples)
 
     checks = _Checks(t)
     for joint in range(2):
@@ -227,13 +371,13 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
             limits.max_joint_acceleration,
         )
         checks.upper("joint jerk", f"{name} jerk", np.abs(jerk[:, joint]), limits.max_joint_jerk)
-        if limits.max_joint_jerk is not None:
+        if steps is not None and steps.limit is not None:
             checks.upper(
                 "acceleration step",
                 f"{name} acceleration step",
-                np.abs(steps[:, joint]),
-                limits.max_joint_jerk / rate_hz,
-                step_times,
+                np.abs(steps.values[:, joint]),
+                steps.limit,
+                steps.times,
             )
         checks.upper("actuator torque", f"{name} torque", np.abs(torque[:, joint]), torque_limit)
         checks.upper(
@@ -243,7 +387,13 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
             robot.actuator.continuous_current_a,
         )
     if limits.max_tool_speed is not None:
-        checks.upper("tool speed", "tool speed", tool_speed / MM, limits.max_tool_speed / MM)
+        speed_limit = limits.max_tool_speed / MM
+        checks.upper(
+            "tool speed",
+            "tool speed",
+            tool_speed / MM,
+            speed_limit if feed is None else speed_limit * feed,
+        )
     if tube is not None:
         checks.upper("contour deviation", "contour deviation", deviation / MM, tube / MM)
     for visit in landmark_errors:
@@ -259,17 +409,16 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
     checks.upper("coverage", "coverage", np.array([gap / MM]), path / MM, np.array([gap_time]))
     checks.upper("backtracking", "backtracking", backtrack / MM, path / MM)
     checks.lower("singularity margin", "singularity margin", margins, robot.min_singularity_margin)
-    contour_judged = not trajectory.metadata.get("ignores_contour", False)
     violations = [v for v in checks.found if contour_judged or RULES[v.rule].judges == ROBOT]
 
     return Report(
-        planner=trajectory.metadata.get("planner"),
-        duration_s=trajectory.duration,
+        planner=planner,
+        duration_s=duration,
         peak_joint_speed_rad_s=_peaks(qd).tolist(),
         joint_speed_limit_rad_s=limits.max_joint_speed,
         peak_joint_acceleration_rad_s2=_peaks(qdd).tolist(),
         rms_jerk_rad_s3=np.sqrt(_time_mean(jerk**2, t)).tolist(),
-        max_acceleration_step_rad_s2=_peaks(steps).tolist(),
+        max_acceleration_step_rad_s2=None if steps is None else _peaks(steps.values).tolist(),
         max_contour_deviation_mm=float(np.max(deviation) / MM),
         rms_contour_deviation_mm=float(np.sqrt(_time_mean(deviation**2, t)) / MM),
         max_tool_speed_mm_s=float(np.max(tool_speed) / MM),
@@ -282,14 +431,14 @@ def _measure(problem: Problem, trajectory: Trajectory, rate_hz: float) -> Report
         min_singularity_margin=float(np.min(margins)),
         contour_length_mm=contour.length / MM,
         duration_lower_bound_s=lower_bound,
-        duration_over_lower_bound=trajectory.duration / lower_bound,
+        duration_over_lower_bound=duration / lower_bound,
         peak_torque_nm=peak_torque.tolist(),
         rms_torque_nm=np.sqrt(_time_mean(torque**2, t)).tolist(),
         torque_margin=(1.0 - peak_torque / robot.actuator.continuous_torque_nm).tolist(),
         peak_current_a=peak_current.tolist(),
         current_margin=(1.0 - peak_current / robot.actuator.continuous_current_a).tolist(),
         energy_j=float(np.trapezoid(np.sum(np.abs(torque * qd), axis=1), t)),
-        effort_n2m2s=float(_time_mean(np.sum(torque**2, axis=1), t) * duration),
+        effort_n2m2s=float(_time_mean(np.sum(torque**2, axis=1), t) * (t[-1] - t[0])),
         violations=violations,
         contour_judged=contour_judged,
     )
@@ -307,14 +456,19 @@ class _Checks:
         rule: str,
         label: str,
         values: np.ndarray,
-        limit: float | None,
+        limit: float | np.ndarray | None,
         times: np.ndarray | None = None,
     ) -> None:
         """Record the worst of ``values`` (at ``times``, default the grid) above ``limit``
-        by more than the rule allows; ``None``: not limited."""
+        (one for all, or one per value: the worst is then the largest ratio) by more than
+        the rule allows; ``None``: not limited."""
         if limit is None or len(values) == 0:
             return
-        worst = int(np.argmax(values))
+        if np.ndim(limit) == 0:
+            worst = int(np.argmax(values))
+        else:
+            worst = int(np.argmax(values / limit))
+            limit = limit[worst]
         if values[worst] > RULES[rule].allowed(limit):
             times = self.t if times is None else times
             self._add(rule, label, values[worst], limit, times[worst])
@@ -355,27 +509,26 @@ def _largest_gap(progress: np.ndarray, in_tube: np.ndarray, length: float) -> tu
 
 def _landmark_errors(
     problem: Problem,
-    trajectory: Trajectory,
+    claimed: Claimed | None,
     t: np.ndarray,
     directions: np.ndarray,
     tolerance: float,
+    between_samples: bool,
 ) -> list[dict[str, Any]]:
-    """Distance on the skull from each landmark visit, in visiting order: at the time the
-    plan claims for it, or, when the plan does not say, at the closest approach of the
-    first pass within ``tolerance`` (m) after the previous visit (the closest approach
-    after it, when the cut never comes that close)."""
-    visits = problem.visit_order
-    claimed = trajectory.landmark_times
+    """Distance on the skull from each landmark visit, in visiting order: where the
+    motion claims it, or, when it does not say, at the closest approach of the first pass
+    within ``tolerance`` (m) after the previous visit (the closest approach after it, when
+    the cut never comes that close); ``between_samples``: that approach measured on the
+    straight segments from the nearest sample to its neighbours."""
     errors = []
     earliest = 0
-    for k, index in enumerate(visits):
+    for k, index in enumerate(problem.visit_order):
         landmark = problem.landmarks[index]
         radius = np.linalg.norm(landmark)
         unit = landmark / radius
-        if claimed is not None and len(claimed) == len(visits):
-            time = float(claimed[k])
-            direction = kinematics.forward_kinematics(trajectory.position([time]), 1.0)[0]
-            error = radius * np.linalg.norm(direction - unit)
+        if claimed is not None:
+            time = float(claimed.times[k])
+            error = radius * np.linalg.norm(claimed.directions[k] - unit)
         else:
             distances = radius * np.linalg.norm(directions[earliest:] - unit, axis=1)
             near = np.flatnonzero(distances <= RULES["landmark visit"].allowed(tolerance))
@@ -386,6 +539,8 @@ def _landmark_errors(
             else:
                 closest = int(np.argmin(distances))
             time, error = float(t[earliest + closest]), distances[closest]
+            if between_samples:
+                time, error = _between(t, directions, earliest + closest, unit, radius)
             if near.size:
                 earliest += closest
         errors.append(
@@ -396,3 +551,24 @@ def _landmark_errors(
             }
         )
     return errors
+
+
+def _between(
+    t: np.ndarray, directions: np.ndarray, k: int, unit: np.ndarray, radius: float
+) -> tuple[float, float]:
+    """The closest approach, (time, s; distance, m), of the cut to the landmark in
+    direction ``unit`` on the skull's sphere of ``radius`` along the straight segments
+    from sample ``k`` to its neighbours (time interpolated along them)."""
+    best = (float(t[k]), float(radius * np.linalg.norm(directions[k] - unit)))
+    for other in (k - 1, k + 1):
+        if not 0 <= other < len(t):
+            continue
+        step = directions[other] - directions[k]
+        squared = float(step @ step)
+        if squared == 0.0:
+            continue
+        along = min(max(float((unit - directions[k]) @ step) / squared, 0.0), 1.0)
+        distance = float(radius * np.linalg.norm(directions[k] + along * step - unit))
+        if distance < best[1]:
+            best = (float(t[k] + along * (t[other] - t[k])), distance)
+    return best

@@ -3,6 +3,9 @@
     spm-opt identify LOG.csv [LOG.csv ...] --problem P.toml --out identified.toml
                      [--validate LOG.csv] [--cutoff-hz 2] [--decimation N] [--min-speed 0.02]
 
+The robot file it writes also carries each actuator's position and velocity loop, which
+:mod:`spm_opt.identify_loop` estimates from the logs' goals and positions.
+
 The logs' samples (:mod:`spm_opt.identify_samples`) give τ_j − τ_payload = Y_b(q, q̇, q̈) β,
 the base parameters of the problem's robot (:mod:`spm_opt.model.base_parameters`), both
 sides through the same low-pass filter (parallel filtering). τ_j is the torque at the
@@ -21,8 +24,9 @@ the joints' torques, the misfit would shrink with η along with the torques them
 Standard errors: η's from the curvature of that misfit, 2 σ² / misfit''; β's
 σ² (W̃ᵀW̃)⁻¹ from the weighted residuals, and η's through dβ/dη. Every variance is
 multiplied by the residuals' correlation factor (neighbouring filtered rows are
-correlated, :func:`_correlation_factor`: 2.0 to 2.5 measured); without it the standard
-errors came out 1.4 to 1.5 times smaller than the estimates' scatter over repeated logs.
+correlated, :func:`~spm_opt.identify_samples.correlation_factor`: 2.0 to 2.5 measured);
+without it the standard errors came out 1.4 to 1.5 times smaller than the estimates'
+scatter over repeated logs.
 
 A base parameter counts as identified when its 95 % interval, two standard errors, lies
 within 10 % of its value: each such estimate is within 10 % of the truth in 19 of 20 logs.
@@ -51,14 +55,17 @@ fitted to the split they had, made the validation error two to three times large
 drives' offsets, which the robot file cannot hold, are in its comments.
 
 Measured on the simulated robot whose plant is ``prototype_plant.toml`` (a 120 s
-excitation and a 30 s validation run at 500 Hz, ``tests/test_identify.py``): η = 0.873 ±
+excitation and a 30 s validation run at 500 Hz, ``tests/test_identify.py``, goals equal
+to the plan: before the executor led them): η = 0.873 ±
 0.016 against the plant's 0.85; the two base parameters identified, the joints' viscous
 friction, 0.294 ± 0.007 and 0.299 ± 0.006 N·m·s/rad against 0.3 (with η held at 1: 0.330
 and 0.341); the validation torques' RMS prediction error falls from 0.040 and 0.039 N·m
 (the prior, ``prototype.toml``) to 0.0073 and 0.0057 (the plant's own model: 0.0075 and
 0.0059; η held at 1: 0.0085 and 0.0082). Over eleven such excitations η comes out 0.863 on
 average, scattered by 0.015, and the viscous friction 3 to 4 % low: a bias that the model's
-own torques do not show (from them, η = 0.8 comes out within 0.001, ± 0.002).
+own torques do not show (from them, η = 0.8 comes out within 0.001, ± 0.002). With the
+goals led (the executor's default), η comes out 0.872 on average over the same eleven,
+scattered by 0.016: the standard errors understate the scatter (3 of 11 beyond two).
 """
 
 from __future__ import annotations
@@ -71,7 +78,8 @@ import scipy.optimize
 from matplotlib.figure import Figure
 
 from spm_opt.errors import InputError, SpmOptError
-from spm_opt.identify_samples import Samples
+from spm_opt.identify_loop import LoopEstimate
+from spm_opt.identify_samples import Samples, correlation_factor
 from spm_opt.model import dynamics
 from spm_opt.model.base_parameters import SAMPLES, base_parameters, random_states
 from spm_opt.model.params import Robot, robot_toml
@@ -177,6 +185,8 @@ class Identification:
     standard : ndarray, shape (38,)
         The robot file's standard parameters (:data:`STANDARD_PARAMETERS`).
     robot : Robot
+        The identified robot, its actuator loops the prior's (:func:`robot_file_text`
+        writes them as :mod:`spm_opt.identify_loop` estimates them).
     """
 
     names: list[str]
@@ -322,7 +332,7 @@ class _Efficiency:
     slope : ndarray, shape (r,)
         dβ/dη of the weighted least squares.
     correlation : float
-        :func:`_correlation_factor` of the residuals at η.
+        :func:`~spm_opt.identify_samples.correlation_factor` of the residuals at η.
     """
 
     estimate: float
@@ -354,7 +364,7 @@ def _efficiency(profile: _Profile, dof: int, lags: int) -> _Efficiency:
     residual = profile.residual(eta)
     below, at, above = profile.misfit(eta - h), float(np.sum(residual**2)), profile.misfit(eta + h)
     curvature = (below - 2.0 * at + above) / h**2
-    correlation = _correlation_factor(residual, lags)
+    correlation = correlation_factor(residual, lags)
     variance = 2.0 * correlation * at / dof / curvature if curvature > 0.0 else np.inf
     slope = (profile.fit(eta + h) - profile.fit(eta - h)) / (2.0 * h)
     return _Efficiency(float(eta), float(np.sqrt(variance)), slope, correlation)
@@ -375,22 +385,6 @@ def _driving(
     weighted, rhs = _stacked(columns, target, weights_std)
     lossless = np.linalg.lstsq(weighted, rhs, rcond=None)[0]
     return (raw_columns @ lossless + payload) * samples.qd > 0.0
-
-
-def _correlation_factor(residual: np.ndarray, lags: int) -> float:
-    """How much correlated rows inflate the estimates' variance over uncorrelated ones:
-    1 + 2 Σ_k (1 − k / (K + 1)) ρ_k over K = ``lags`` (Newey and West's weights), ρ_k the
-    autocorrelation of the residuals (M, 2), both joints pooled, at k rows; at least 1 (and
-    1 for residuals that are all 0)."""
-    centred = residual - np.mean(residual, axis=0)
-    total = float(np.sum(centred**2))
-    if total == 0.0:
-        return 1.0
-    weighted = sum(
-        (1.0 - k / (lags + 1)) * float(np.sum(centred[:-k] * centred[k:])) / total
-        for k in range(1, min(lags, len(centred) - 1) + 1)
-    )
-    return max(1.0, 1.0 + 2.0 * weighted)
 
 
 def identify(robot: Robot, samples: Samples) -> Identification:
@@ -604,8 +598,9 @@ def prediction_rms(robot: Robot, samples: Samples) -> np.ndarray:
     return np.sqrt(np.mean(error**2, axis=0))
 
 
-def robot_file_text(identification: Identification, name: str) -> str:
-    """The identified robot as the text of a robot file, its estimates in comments."""
+def robot_file_text(identification: Identification, loops: LoopEstimate, name: str) -> str:
+    """The identified robot, its actuator loops from ``loops``, as the text of a robot file,
+    the estimates in comments."""
     ident = identification
     lines = [
         f"# Identified by spm-opt identify from {ident.duration_s:.1f} s of log "
@@ -627,7 +622,8 @@ def robot_file_text(identification: Identification, name: str) -> str:
         "# Not in the robot file: the drives' offsets "
         f"{drive['offset.theta1']:.4g} and {drive['offset.theta2']:.4g} N m."
     )
-    return "\n".join(lines) + "\n" + robot_toml(ident.robot, name)
+    lines += loops.comment_lines()
+    return "\n".join(lines) + "\n" + robot_toml(loops.robot(ident.robot), name)
 
 
 def _efficiency_comment(ident: Identification) -> str:

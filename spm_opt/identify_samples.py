@@ -13,7 +13,9 @@ samples through the same low-pass filter, at ``cutoff_hz`` (Gautier's parallel
 filtering, :meth:`Samples.parallel`): the regressor holds the friction's sign, which
 filtering the motion first would not carry through. One sample in ``decimation`` is kept
 (the filter took out what lies between them), and samples where a joint turns slower than
-``min_speed_rad_s`` are left out: there friction holds rather than slides.
+``min_speed_rad_s`` are left out: there friction holds rather than slides. Filtered rows'
+residuals are correlated: :func:`correlation_factor` says how much that inflates a fit's
+variances.
 """
 
 from __future__ import annotations
@@ -180,3 +182,19 @@ def _uniform(path: Path, t: np.ndarray, values: np.ndarray) -> tuple[float, np.n
         raise InputError(f"log {path}: time_s does not increase")
     grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step)) + 1)
     return 1.0 / step, np.stack([np.interp(grid, t, column) for column in values.T], axis=1)
+
+
+def correlation_factor(residual: np.ndarray, lags: int) -> float:
+    """How much correlated rows inflate the estimates' variance over uncorrelated ones:
+    1 + 2 Σ_k (1 − k / (K + 1)) ρ_k over K = ``lags`` (Newey and West's weights), ρ_k the
+    autocorrelation of the residuals (M, c), their columns (the joints) pooled, at k rows;
+    at least 1 (and 1 for residuals that are all 0)."""
+    centred = residual - np.mean(residual, axis=0)
+    total = float(np.sum(centred**2))
+    if total == 0.0:
+        return 1.0
+    weighted = sum(
+        (1.0 - k / (lags + 1)) * float(np.sum(centred[:-k] * centred[k:])) / total
+        for k in range(1, min(lags, len(centred) - 1) + 1)
+    )
+    return max(1.0, 1.0 + 2.0 * weighted)

@@ -17,6 +17,7 @@ The evaluator's tolerance, one table (:data:`RULES`):
 | landmark visit | mm | 0.5 % | cut |
 | coverage | mm | 0.5 % | cut |
 | backtracking | mm | 0.5 % | cut |
+| hold acceleration, hold jerk | rad/s², rad/s³ | 0.5 % | cut |
 | joint range | deg | none (hard) | robot |
 | singularity margin | — | none (hard) | robot |
 
@@ -25,7 +26,9 @@ polynomials' rounding are not the robot's business); the joint range and the sin
 margin are mechanical facts with no slack. "Robot" limits protect the machine and are what
 the executor checks before it moves; "cut" limits judge whether the plan cuts the planned
 contour: every landmark visited in order within the path tolerance, the whole contour swept
-in order, no stretch cut twice.
+in order, no stretch cut twice, and room left everywhere for a feed hold that stops the tool
+on the path within the problem's ``hold_within_s`` (:mod:`spm_opt.hold_room`; without it a
+hold ends in the safe stop, which keeps the machine safe but not the tool on the path).
 
 What planners impose (:func:`planner_bounds`): each rate-type limit less the planner's
 ``margin`` (a fraction kept for the motion between the points where it is imposed). The
@@ -44,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spm_opt.hold_room import planner_room
 from spm_opt.model.params import MM
 from spm_opt.problem import Problem
 
@@ -102,6 +106,8 @@ RULES: dict[str, Rule] = {
         Rule("landmark visit", "mm", RELATIVE_TOLERANCE, CUT),
         Rule("coverage", "mm", RELATIVE_TOLERANCE, CUT),
         Rule("backtracking", "mm", RELATIVE_TOLERANCE, CUT),
+        Rule("hold acceleration", "rad/s^2", RELATIVE_TOLERANCE, CUT),
+        Rule("hold jerk", "rad/s^3", RELATIVE_TOLERANCE, CUT),
     )
 }
 """Every limit the evaluator checks, by name."""
@@ -116,11 +122,22 @@ def tolerance_note() -> str:
     )
 
 
-def path_tolerance(problem: Problem) -> float:
+def contour_tube(problem: Problem, executed: bool = False) -> float | None:
+    """The contour tolerance a cut is judged against, m (None: the problem sets none): a
+    plan's is the problem's less its execution reserve, which is left for tracking; an
+    executed cut (``executed``) may use the whole."""
+    limits = problem.limits
+    if limits.contour_tolerance is None:
+        return None
+    return limits.contour_tolerance - (0.0 if executed else limits.execution_reserve)
+
+
+def path_tolerance(problem: Problem, executed: bool = False) -> float:
     """How close the cut must pass each landmark and how far it may backtrack, m: the
-    contour tolerance, or :data:`DEFAULT_PATH_TOLERANCE_M` when the problem sets none."""
-    tolerance = problem.limits.contour_tolerance
-    return DEFAULT_PATH_TOLERANCE_M if tolerance is None else tolerance
+    contour tube (:func:`contour_tube`), or :data:`DEFAULT_PATH_TOLERANCE_M` when the
+    problem sets no contour tolerance."""
+    tube = contour_tube(problem, executed)
+    return DEFAULT_PATH_TOLERANCE_M if tube is None else tube
 
 
 @dataclass(frozen=True)
@@ -132,6 +149,7 @@ class PlannerBounds:
     ----------
     joint_speed : float, rad/s
     joint_acceleration, joint_jerk : float or None, rad/s², rad/s³
+        Less the room a feed hold needs, where the planner keeps it.
     tool_speed : float or None, m/s
     contour_tolerance : float or None, m
     load_torque : float, N·m
@@ -162,11 +180,16 @@ def torque_limit(problem: Problem) -> float:
     return min(problem.max_joint_torque, at_current)
 
 
-def planner_bounds(problem: Problem, margin: float) -> PlannerBounds:
+def planner_bounds(problem: Problem, margin: float, *, hold_room: bool = True) -> PlannerBounds:
     """What a planner imposes for ``problem``'s limits, keeping ``margin`` (a fraction) of
-    each rate-type limit in reserve."""
+    each rate-type limit in reserve; the joint acceleration and jerk also keep the room a
+    feed hold needs (:func:`spm_opt.hold_room.planner_room`) unless ``hold_room`` is False
+    (a motion that cuts no contour: no hold keeps it on a path)."""
     limits, robot = problem.limits, problem.robot
     keep = 1.0 - margin
+    acceleration, jerk = limits.max_joint_acceleration, limits.max_joint_jerk
+    if hold_room:
+        acceleration, jerk = planner_room(problem)
 
     def kept(value: float | None) -> float | None:
         return None if value is None else value * keep
@@ -174,10 +197,10 @@ def planner_bounds(problem: Problem, margin: float) -> PlannerBounds:
     actuator = robot.actuator
     return PlannerBounds(
         joint_speed=limits.max_joint_speed * keep,
-        joint_acceleration=kept(limits.max_joint_acceleration),
-        joint_jerk=kept(limits.max_joint_jerk),
+        joint_acceleration=kept(acceleration),
+        joint_jerk=kept(jerk),
         tool_speed=kept(limits.max_tool_speed),
-        contour_tolerance=kept(limits.contour_tolerance),
+        contour_tolerance=kept(contour_tube(problem)),
         load_torque=actuator.gear_efficiency * torque_limit(problem) * keep,
         joint_range=np.asarray(robot.joint_range, dtype=float),
         min_singularity_margin=robot.min_singularity_margin,

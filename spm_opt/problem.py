@@ -32,6 +32,20 @@ _SAME_DIRECTION_RAD = 1e-6
 MIN_SEGMENT_DURATION_S = 0.01
 MAX_SEGMENT_DURATION_S = 3600.0
 """Bounds of one segment's duration, s: shorter is no cut, longer no surgery."""
+DEFAULT_EXECUTION_RESERVE_MM = 0.03
+"""The contour tolerance a plan leaves for execution when its file gives none, mm (at most
+half the tolerance). Measured on the simulated robot (plant ``prototype_plant.toml``, its
+encoder offsets at zero, goals led): executing the paper's flap moved the true cut up to
+0.025 mm farther from the contour than the plan (ocp-min-time: 0.083 planned, 0.108
+executed; toppra 0.000 and 0.030; ocp-min-energy 0.100 and 0.106), mostly where a joint
+reverses and its friction changes sign."""
+DEFAULT_HOLD_WITHIN_S = 1.0
+"""The time within which a feed hold brings the tool to rest on the path when the file
+gives none, s (the planners keep the room it needs: :mod:`spm_opt.hold_room`, where the
+cost of shorter bounds is measured)."""
+MAX_HOLD_WITHIN_S = 60.0
+"""Longest hold bound accepted, s: a stop that takes longer is no hold."""
+
 MIN_LANDMARK_RADIUS = 0.02
 """Smallest distance of a landmark on the skull from the isocenter, m (catches metres
 written where millimetres are asked for)."""
@@ -52,6 +66,15 @@ class Limits:
         Largest allowed distance of the cut point from the planned contour.
     max_joint_torque : float or None, N·m
         Largest actuator torque (default in files: the actuator's continuous torque).
+    execution_reserve : float, m
+        The part of the contour tolerance kept for execution: a plan's cut must stay
+        within ``contour_tolerance − execution_reserve`` of the contour, the executed cut
+        within ``contour_tolerance`` (see :func:`spm_opt.limits.contour_tube`).
+    hold_within_s : float or None, s
+        A feed hold brings the commanded motion to rest on the path within this time of
+        the request, from any point of the plan at full feed; the planners keep the
+        acceleration and jerk it needs (:mod:`spm_opt.hold_room`). None: no bound, no room
+        kept.
     """
 
     max_joint_speed: float
@@ -60,6 +83,8 @@ class Limits:
     max_tool_speed: float | None = None
     contour_tolerance: float | None = None
     max_joint_torque: float | None = None
+    execution_reserve: float = 0.0
+    hold_within_s: float | None = DEFAULT_HOLD_WITHIN_S
 
 
 @dataclass(frozen=True)
@@ -311,6 +336,24 @@ def _limits(table: Table, robot: Robot) -> Limits:
             torque,
             f"expected at most the actuator's continuous torque, {actuator_torque:g} N·m",
         )
+    reserve = table.number("execution_reserve_mm", minimum=0.0, default=None)
+    if tolerance is None:
+        if reserve:
+            raise table.error(
+                "execution_reserve_mm",
+                reserve,
+                "expected no reserve without a contour_tolerance_mm",
+            )
+        reserve = 0.0
+    elif reserve is None:  # the default, leaving a plan at least half of a narrow tube
+        reserve = min(DEFAULT_EXECUTION_RESERVE_MM, 0.5 * tolerance)
+    elif reserve >= tolerance:
+        raise table.error(
+            "execution_reserve_mm",
+            reserve,
+            f"expected less than contour_tolerance_mm ({tolerance:g}): a plan must keep "
+            "some of the tube",
+        )
     return Limits(
         max_joint_speed=actuator_speed if speed_rpm is None else speed_rpm * RPM,
         max_joint_acceleration=table.number("max_joint_acceleration_rad_s2", **positive),
@@ -318,4 +361,12 @@ def _limits(table: Table, robot: Robot) -> Limits:
         max_tool_speed=None if tool_speed is None else tool_speed * MM,
         contour_tolerance=None if tolerance is None else tolerance * MM,
         max_joint_torque=actuator_torque if torque is None else torque,
+        execution_reserve=reserve * MM,
+        hold_within_s=table.number(
+            "hold_within_s",
+            minimum=0.0,
+            exclusive_minimum=True,
+            maximum=MAX_HOLD_WITHIN_S,
+            default=DEFAULT_HOLD_WITHIN_S,
+        ),
     )

@@ -12,15 +12,21 @@ copies do pass, so a case can only fail for the reason it is about.
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import subprocess
 import sys
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import pytest
 
+import spm_opt as so
 from spm_opt.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -664,3 +670,160 @@ def test_bad_emulate(
 ) -> None:
     status, shown = run_cli(["emulate", *options])
     assert_one_error(status, capsys.readouterr().err, expected, tmp_path, shown)
+
+
+# --- bad execution logs, through `spm-opt evaluate` -------------------------------------------
+
+BONE_FLAP = ROOT / "problems" / "craniotomy_bone_flap.toml"
+
+
+@pytest.fixture(scope="module")
+def executed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with a run of the hardware problem's toppra plan on the simulated robot:
+    run.csv, run.json and the plant's true state, true.npz."""
+    folder = tmp_path_factory.mktemp("executed")
+    problem = so.load_problem(HARDWARE_PROBLEM)
+    plan = so.plan(problem, "toppra")
+    backend = so.SimulatedRobot(problem.robot, start_rad=plan.position(0.0))
+    so.execute(plan, backend, problem, folder / "run.csv")
+    backend.trace.save(folder / "true.npz")
+    return folder
+
+
+def _edit_table(edit: Callable[[pd.DataFrame], pd.DataFrame]) -> Callable[[Path], None]:
+    def apply(folder: Path) -> None:
+        table = pd.read_csv(folder / "run.csv", dtype=str, keep_default_na=False)
+        edit(table).to_csv(folder / "run.csv", index=False)
+
+    return apply
+
+
+def _nan_in_a_read(table: pd.DataFrame) -> pd.DataFrame:
+    table.loc[100, "position_theta2_rad"] = "nan"  # line 102
+    return table
+
+
+def _times_swapped(table: pd.DataFrame) -> pd.DataFrame:
+    table.loc[[50, 51], "time_s"] = table.loc[[51, 50], "time_s"].to_numpy()  # lines 52, 53
+    return table
+
+
+def _trace_cut(folder: Path) -> None:
+    with np.load(folder / "true.npz") as data:
+        arrays = {name: data[name][: len(data["time_s"]) // 2] for name in data.files}
+    with open(folder / "true.npz", "wb") as file:
+        np.savez(file, **arrays)
+
+
+LOG_CASES = {
+    "log-missing": (lambda folder: (folder / "run.csv").unlink(), [], ("run.csv",)),
+    "columns-missing": (
+        _edit_table(lambda table: table.drop(columns=["reference_theta1_rad", "status"])),
+        [],
+        ("run.csv", "missing columns reference_theta1_rad, status"),
+    ),
+    "no-plan-rows": (
+        _edit_table(lambda table: table.assign(phase="approach")),
+        [],
+        ("run.csv", "no plan rows"),
+    ),
+    "nan-in-a-read": (
+        _edit_table(_nan_in_a_read),
+        [],
+        ("run.csv", "line 102", "position_theta2_rad is empty or NaN", "read did not fail"),
+    ),
+    "time-not-increasing": (
+        _edit_table(_times_swapped),
+        [],
+        ("run.csv", "line 53", "time_s does not increase"),
+    ),
+    "header-missing": (
+        lambda folder: (folder / "run.json").unlink(),
+        [],
+        ("run.csv", "no header run.json"),
+    ),
+    "header-not-json": (
+        lambda folder: (folder / "run.json").write_text("{", encoding="utf-8"),
+        [],
+        ("run.json", "not JSON"),
+    ),
+    "other-problem": (
+        lambda folder: None,
+        ["--problem-file", str(BONE_FLAP)],
+        ("run.csv refused", "ran under craniotomy_hardware", "--other-problem"),
+    ),
+    "trace-short": (_trace_cut, ["--trace", "true.npz"], ("true.npz", "covers", "this run")),
+    "trace-missing": (
+        lambda folder: (folder / "true.npz").unlink(),
+        ["--trace", "true.npz"],
+        ("true.npz", "no such file"),
+    ),
+    "trace-not-a-trace": (
+        lambda folder: (folder / "true.npz").write_bytes(b"not a zip"),
+        ["--trace", "true.npz"],
+        ("true.npz", "not a trace"),
+    ),
+}
+
+
+def _evaluate_argv(folder: Path, options: list[str]) -> list[str]:
+    """``spm-opt evaluate`` of the copied log: the problem it ran under unless
+    ``--problem-file`` says another, the trace's file name taken in ``folder``."""
+    problem = HARDWARE_PROBLEM
+    if "--problem-file" in options:
+        problem = Path(options[options.index("--problem-file") + 1])
+        options = [o for o in options if o not in ("--problem-file", str(problem))]
+    options = [str(folder / o) if o.endswith(".npz") else o for o in options]
+    return ["evaluate", str(problem), str(folder / "run.csv"), *options]
+
+
+def _copy(executed: Path, tmp_path: Path) -> Path:
+    folder = tmp_path / "logs"
+    shutil.copytree(executed, folder)
+    return folder
+
+
+def test_an_executed_log_is_judged(
+    executed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The unedited copy is judged, with its trace: every bad case below is one edit away."""
+    folder = _copy(executed, tmp_path)
+    status, shown = run_cli(_evaluate_argv(folder, ["--trace", "true.npz", "--json"]))
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert captured.err == "" and not shown
+    assert set(json.loads(captured.out)) == {"measured", "true"}
+
+
+@pytest.mark.parametrize(
+    ("edit", "options", "expected"),
+    [pytest.param(*case, id=name) for name, case in LOG_CASES.items()],
+)
+def test_bad_execution_log(
+    edit: Callable[[Path], None],
+    options: list[str],
+    expected: tuple[str, ...],
+    executed: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    folder = _copy(executed, tmp_path)
+    edit(folder)
+    before = sorted(folder.iterdir())
+    status, shown = run_cli(_evaluate_argv(folder, options))
+    captured = capsys.readouterr()
+    assert_one_error(status, captured.err, expected, tmp_path, shown)
+    assert captured.out == ""
+    assert sorted(folder.iterdir()) == before  # nothing written
+
+
+def test_trace_with_a_trajectory(
+    hardware_plan_csv: Path, executed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["evaluate", str(HARDWARE_PROBLEM), str(hardware_plan_csv)]
+    status, shown = run_cli([*argv, "--trace", str(executed / "true.npz")])
+    captured = capsys.readouterr()
+    assert_one_error(
+        status, captured.err, ("--trace: only with an execution log",), tmp_path, shown
+    )
+    assert captured.out == ""

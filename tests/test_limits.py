@@ -56,7 +56,10 @@ def test_every_planner_keeps_the_torque_the_evaluator_judges(geared_problem, pla
 def test_planners_bound_the_load_side_by_efficiency_times_the_limit(geared_problem):
     bounds = planner_bounds(geared_problem, 0.01)
     assert bounds.load_torque == pytest.approx(GEAR_EFFICIENCY * TORQUE_LIMIT * 0.99)
-    assert bounds.contour_tolerance == pytest.approx(geared_problem.limits.contour_tolerance * 0.99)
+    limits = geared_problem.limits
+    tube = limits.contour_tolerance - limits.execution_reserve  # the reserve is execution's
+    assert limits.execution_reserve > 0.0
+    assert bounds.contour_tolerance == pytest.approx(tube * 0.99)
     assert np.array_equal(bounds.joint_range, geared_problem.robot.joint_range)
 
 

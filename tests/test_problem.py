@@ -84,3 +84,20 @@ def test_overrides_replace_values_before_validation():
         so.load_problem(path, {"limits.max_tool_sped_mm_s": 5.0})
     with pytest.raises(so.InputError, match="override name.x: name is not a table"):
         so.load_problem(path, {"name.x": 1})
+
+
+def test_the_execution_reserve_is_part_of_the_tolerance():
+    """The plan's share of the tube is the tolerance less the reserve: 0.03 mm by default,
+    at most half a narrow tube, never all of it, and none without a tube."""
+    root = Path(__file__).resolve().parents[1] / "problems"
+    paper, hardware = root / "craniotomy_bone_flap.toml", root / "craniotomy_hardware.toml"
+    assert so.load_problem(paper).limits.execution_reserve == pytest.approx(0.03e-3)
+    narrow = so.load_problem(paper, {"limits.contour_tolerance_mm": 0.04})
+    assert narrow.limits.execution_reserve == pytest.approx(0.02e-3)
+    given = so.load_problem(paper, {"limits.execution_reserve_mm": 0.05})
+    assert given.limits.execution_reserve == pytest.approx(0.05e-3)
+    assert so.load_problem(hardware).limits.execution_reserve == 0.0
+    with pytest.raises(so.InputError, match=r"execution_reserve_mm = 0.1: expected less than"):
+        so.load_problem(paper, {"limits.execution_reserve_mm": 0.1})
+    with pytest.raises(so.InputError, match=r"execution_reserve_mm = 0.01: expected no reserve"):
+        so.load_problem(hardware, {"limits.execution_reserve_mm": 0.01})

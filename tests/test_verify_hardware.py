@@ -32,11 +32,13 @@ FILES = {
 
 @pytest.fixture(scope="module")
 def steered(hardware_problem, hardware_plan, tmp_path_factory):
-    """The scripted run with three holds and two overrides, its log, header and samples."""
+    """The scripted run with three holds and two overrides, its log, header and samples;
+    the plant's true state is saved beside the log (true.npz)."""
     path = tmp_path_factory.mktemp("steered")
-    _, table, header, _ = scripted_run(
+    _, table, header, trace = scripted_run(
         hardware_problem, hardware_plan, path, THREE_HOLDS_TWO_OVERRIDES
     )
+    np.savez(path / "true.npz", **trace)
     return path, table, header, RunSamples.from_log(hardware_plan, table)
 
 
@@ -45,7 +47,9 @@ def verification(steered, hardware_problem, hardware_plan):
     """The files write_verification wrote for the steered run, and its summary."""
     path = steered[0]
     out = path / "verification"
-    written = write_verification(hardware_problem, hardware_plan, path / "run.csv", out)
+    written = write_verification(
+        hardware_problem, hardware_plan, path / "run.csv", out, trace_path=path / "true.npz"
+    )
     return out, written, json.loads((out / "hardware_verification.json").read_text())
 
 
@@ -59,7 +63,11 @@ def test_every_file_is_written_and_each_figure_is_a_real_png(verification):
             assert data.startswith(PNG_SIGNATURE) and len(data) > 20_000, path.name
     assert summary["run"]["completed"]
     assert summary["executed_cut"]["max_distance_mm"] < 0.1
-    assert "## Holds and overrides" in (out / "hardware_verification.md").read_text()
+    report = (out / "hardware_verification.md").read_text()
+    assert "## Holds and overrides" in report and "## The executed cut, judged" in report
+    measured, true = summary["judged"]["measured"], summary["judged"]["true"]
+    assert measured["angles"] == "measured" and true["angles"] == "true"
+    assert measured["completed"] and measured["failed_reads_skipped"] == 0
 
 
 def test_the_holds_section_is_the_headers_events(verification, steered):

@@ -9,7 +9,9 @@ forgotten when the run ends): before connecting, the run ends with nothing moved
 goal of the plan goes out. Then a fixed-rate loop on the backend's
 clock reads both actuators, checks them, writes the next goal positions and logs the
 sample. The goals follow the plan at the operator's feed (:mod:`spm_opt.execution.feed`):
-held, resumed and overridden from any thread, always on the planned path.
+held, resumed and overridden from any thread, always on the planned path; a hold where the
+plan leaves no room for a stop on the path (:mod:`spm_opt.hold_room`) is the safe stop
+below, at once (the log's feed events say "no room: safe stop").
 On a hardware error, a following error beyond the tolerance, a run of cycles with a
 failed read or write longer than the retry budget, SIGINT or SIGTERM, any other exception
 raised by the backend or in the loop, the robot is brought
@@ -37,7 +39,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import ruckig
@@ -51,7 +53,7 @@ from spm_opt.execution.backend import (
     Measurement,
     hardware_error_names,
 )
-from spm_opt.execution.feed import FeedProfile, FeedRequests, Pace, feed_ceiling
+from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace, feed_ceiling
 from spm_opt.execution.log import LogWriter
 from spm_opt.execution.preflight import degrees
 from spm_opt.execution.realtime import frozen_heap
@@ -392,20 +394,30 @@ class Executor:
 
     def _follow_plan(self, trajectory: Trajectory) -> None:
         """Stream the plan's goals at the pace the operator asks for, to the plan's end;
-        each cycle is checked, and a fault or a hold longer than ``max_hold_s`` raises
-        :class:`_Stop`."""
+        each cycle is checked, and a fault, a hold for which no path-keeping stop fits
+        (at once, in the cycle that saw it asked) or a hold longer than ``max_hold_s``
+        raises :class:`_Stop`."""
         self._phase = "plan"
         settings, requests = self.settings, self._requests
         limits = settings.joint_limits(self.problem)
         override, held = asked = requests.requested()
-        profile = FeedProfile(trajectory, limits, 0.0 if held else override, 0.5 / settings.rate_hz)
+        profile = FeedProfile(
+            trajectory,
+            limits,
+            0.0 if held else override,
+            0.5 / settings.rate_hz,
+            self.problem.limits.hold_within_s,
+        )
         begin, hold = None, FeedHoldWatch(settings, self.problem.robot.actuator)
         try:
             while True:
                 cycle = self._begin_cycle()
                 begin = cycle.time_s if begin is None else begin
                 override, held = requested = requests.requested()
-                pace = profile.advance(cycle.time_s - begin, 0.0 if held else override)
+                try:
+                    pace = profile.advance(cycle.time_s - begin, 0.0 if held else override)
+                except NoRoom as no_room:
+                    self._no_room(cycle, asked, requested, no_room)
                 for event in _request_events(asked, requested):
                     self._feed_event(cycle, pace, event)
                 asked = requested
@@ -423,6 +435,21 @@ class Executor:
                     return
         finally:
             self._pace = None
+
+    def _no_room(
+        self,
+        cycle: _Cycle,
+        asked: tuple[float, bool],
+        requested: tuple[float, bool],
+        no_room: NoRoom,
+    ) -> NoReturn:
+        """A hold for which no path-keeping stop fits: record it and raise :class:`_Stop`,
+        whose first goal goes out in this cycle."""
+        pace = self._pace or Pace(0.0, 0.0, 0.0, 0.0)
+        for event in _request_events(asked, requested):
+            self._feed_event(cycle, pace, event)
+        self._feed_event(cycle, pace, "no room: safe stop")
+        raise _Stop(f"feed hold: {no_room}; the safe stop instead", cycle)
 
     def _feed_event(self, cycle: _Cycle, pace: Pace, event: str) -> None:
         """Record a hold, a resume, an override or a hold's progress, with its time."""
@@ -640,14 +667,15 @@ class Executor:
                 return f"hardware error on actuator {joint + 1}: {names}"
         error = np.abs(measurement.position_rad - expected)
         cycle.following_error = error
+        speed = np.maximum(np.abs(rate), np.abs(measurement.velocity_rad_s))
         allowed = following_error_limit(
-            rate, self.problem.limits.max_joint_speed, *self.settings.following_error_bounds
+            speed, self.problem.limits.max_joint_speed, *self.settings.following_error_bounds
         )
         worst = int(np.argmax(error / allowed))
         if error[worst] > allowed[worst]:
             return (
                 f"following error of theta{worst + 1}: {error[worst] / DEG:.3f} deg "
-                f"(tolerance {allowed[worst] / DEG:.3f} deg at {abs(rate[worst]):.3f} rad/s)"
+                f"(tolerance {allowed[worst] / DEG:.3f} deg at {speed[worst]:.3f} rad/s)"
             )
         return ""
 

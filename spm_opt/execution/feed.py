@@ -21,10 +21,29 @@ stretch until the profile stays inside it), with r between its start and its tar
 
 The bounds use :data:`HEADROOM` of each limit. Every profile is then checked before it is
 used, at samples half a control period apart: the joints' speed, acceleration and jerk
-within the limits as the evaluator allows them (:mod:`spm_opt.limits`), or within what the
-plan itself needs at that feed where that is more (the ceiling's business), and r ≥ 0. A
-change with no room (a time-optimal plan braking at its acceleration limit leaves none to
-brake harder) waits and is tried again the next cycle; the goal goes on as before.
+(signed, with r̈ on either side of each sample) within the limits as the evaluator allows
+them (:mod:`spm_opt.limits`), or within what the plan itself needs at that feed where that
+is more (the ceiling's business), and r ≥ 0.
+
+Where that finds no room (a time-optimal plan braking at its acceleration limit leaves none
+to brake harder, and its window's bounds count every term at its worst):
+
+- a hold takes a reference stop of :mod:`spm_opt.hold_room` (r to 0 with |ṙ| ≤ R and
+  |r̈| ≤ Q), the quickest that fits of those within :data:`HOLD_SHARES` of the problem's
+  ``hold_within_s``, checked the same way, where it is quicker than the change above or
+  that one does not fit. Every plan the evaluator passes leaves the whole bound's stop
+  room from any steady feed up to 1 (the planners keep it); above 1, its bounds scale with
+  the feed (the stop of the plan run that much faster, whose room the ceiling keeps,
+  :func:`feed_ceiling`), so it lasts no longer. With none that fits,
+  :class:`NoRoom`: the executor ends the run in the safe stop at once, never waiting;
+- a higher feed (a resume) goes in stages: the highest of :data:`STAGES` of it that fits
+  now, and the whole of it, tried again each cycle, as soon as the plan gives room (a plan
+  at its acceleration or jerk limit leaves room at 90 % of its pace);
+- a lower feed that is not a hold waits and is tried again the next cycle; the goal goes on
+  as before.
+
+A new target other than a hold waits for a change under way (a stop, a stage) to end; a
+hold is tried at once, from wherever the feed is.
 """
 
 from __future__ import annotations
@@ -39,6 +58,7 @@ import ruckig
 from spm_opt.errors import InputError
 from spm_opt.evaluate import evaluate
 from spm_opt.execution.tracking import Lead, led_goals_outside
+from spm_opt.hold_room import hold_stop
 from spm_opt.limits import RULES
 from spm_opt.problem import Problem
 from spm_opt.ruckig_local import calculate_locally
@@ -61,10 +81,25 @@ FEED_STEP = 0.1
 CEILING_RESOLUTION = 0.01
 """The feed ceiling is found to this fraction."""
 
+LONGEST_CHANGE_S = 2.0
+"""Longest change of the feed tried, s: a longer one (its bounds shrunk far) costs its check
+more than it is worth; the change waits, or goes in stages, instead."""
+
+STAGES = (0.9, 0.7, 0.5, 0.3, 0.1)
+"""Fractions of a higher feed tried, highest first, when the whole of it finds no room."""
+
+HOLD_SHARES = (0.25, 0.5, 1.0)
+"""Shares of the hold bound the reference stop is tried within, quickest first: where the
+plan leaves more room than the bound needs, the hold stops sooner."""
+
 _ATTEMPTS = 8
 _WINDOW_SAMPLES = 200
 _FIRST_SPAN_S = 0.05
 _TINY = 1e-12
+
+
+class NoRoom(Exception):
+    """No path-keeping stop fits the limits now: a hold must be the safe stop."""
 
 
 @dataclass(frozen=True)
@@ -140,6 +175,9 @@ class FeedProfile:
         The feed at the plan's start (the plan starts at rest, so it may start at any).
     sample_s : float, s
         Spacing of the samples a profile is checked at (half the control period).
+    hold_within_s : float or None, s
+        The problem's hold bound, which the reference stops a hold falls back on keep
+        (None: the problem sets none).
     """
 
     def __init__(
@@ -148,6 +186,7 @@ class FeedProfile:
         limits: JointLimits,
         feed: float,
         sample_s: float,
+        hold_within_s: float | None,
     ) -> None:
         self._trajectory = trajectory
         self._start = trajectory.start_time
@@ -159,6 +198,8 @@ class FeedProfile:
             RULES["joint jerk"].allowed(limits.jerk),
         )
         self._sample_s = sample_s
+        within = [] if hold_within_s is None else [hold_within_s * s for s in HOLD_SHARES]
+        self._stops = [hold_stop(time) for time in within]
         feed = max(feed, 0.0)
         self._origin_s, self._origin = 0.0, (0.0, feed, 0.0)
         self._motion: ruckig.Trajectory | None = None
@@ -168,16 +209,26 @@ class FeedProfile:
     def advance(self, time_s: float, target: float) -> Pace:
         """The pace at ``time_s`` (s since the plan phase began), heading for ``target``
         (≥ 0; at most the plan's ceiling, which :class:`FeedRequests` keeps) if a
-        jerk-limited change to it fits the limits now."""
+        jerk-limited change to it fits the limits now, or to a stage of a higher target
+        (see the module docstring).
+
+        Raises
+        ------
+        NoRoom
+            When ``target`` is 0 (a hold) and no path-keeping stop fits.
+        """
         target = max(target, 0.0)
-        if target != self._target:
+        if target != self._target and (target == 0.0 or self._steady(time_s)):
             state = self._state(time_s)
-            motion = self._change(state, target)
+            if target == 0.0:
+                goal, motion = 0.0, self._stop(state)
+            else:
+                goal, motion = self._towards(state, target)
             if motion is not False:
-                self._origin_s, self._origin, self._target = time_s, state, target
+                self._origin_s, self._origin, self._target = time_s, state, goal
                 self._motion = motion
                 tau = state[0] if motion is None else _end_tau(motion)
-                self._end = (tau, target, 0.0)
+                self._end = (tau, goal, 0.0)
         tau, feed, rate = self._state(time_s)
         return Pace(min(tau, self.duration), feed, rate, self._target)
 
@@ -199,6 +250,12 @@ class FeedProfile:
         )
 
     # ------------------------------------------------------------------ internals
+    def _steady(self, time_s: float) -> bool:
+        """No change of the feed is under way at ``time_s``: a new target other than a hold
+        waits for the change under way (a stop, a stage) to end before it is tried."""
+        motion = self._motion
+        return motion is None or time_s - self._origin_s >= motion.duration
+
     def _state(self, time_s: float) -> tuple[float, float, float]:
         """(τ, r, ṙ) at ``time_s`` on the current profile, then at its final feed."""
         elapsed = time_s - self._origin_s
@@ -209,6 +266,46 @@ class FeedProfile:
         since = elapsed - (motion.duration if motion is not None else 0.0)
         tau, feed, _ = self._end
         return tau + feed * since, feed, 0.0
+
+    def _stop(self, state: tuple[float, float, float]) -> ruckig.Trajectory | None:
+        """The quickest stop that fits: the checked change to 0, or a reference stop
+        (quickest first) where that is quicker; None when the feed is already at rest;
+        raises :class:`NoRoom` when none fits."""
+        best = self._change(state, 0.0)
+        if best is None:
+            return None
+        _, feed, rate = state
+        faster = max(feed, 1.0)  # above 100 %: the reference stop of the plan run faster
+        for stop in self._stops:
+            if best is not False and best.duration <= stop.duration_s:
+                break
+            rate_bound, jerk_bound = faster * stop.rate_per_s, faster * stop.jerk_per_s2
+            motion = _profile(state, 0.0, rate_bound, jerk_bound)
+            overshoot = max(rate, 0.0) ** 2 / (2.0 * jerk_bound)
+            if self._keeps_limits(motion, feed + overshoot):
+                best = motion
+                break
+        if best is False:
+            tau, feed, _ = state
+            raise NoRoom(f"no path-keeping stop fits at plan time {tau:.3f} s, feed {feed:.0%}")
+        return best
+
+    def _towards(
+        self, state: tuple[float, float, float], target: float
+    ) -> tuple[float, ruckig.Trajectory | None | bool]:
+        """(the feed headed for, its checked profile) towards ``target`` > 0: the whole
+        change, or for a higher feed the highest stage of it above both the feed and the
+        feed already headed for that fits; False as the profile when none does."""
+        motion = self._change(state, target)
+        if motion is not False or target < state[1]:
+            return target, motion
+        for stage in (fraction * target for fraction in STAGES):
+            if stage <= max(state[1], self._target):
+                break
+            motion = self._change(state, stage)
+            if motion is not False:
+                return stage, motion
+        return self._target, False
 
     def _change(
         self, state: tuple[float, float, float], target: float
@@ -229,6 +326,8 @@ class FeedProfile:
             if rate_bound <= 0.0 or jerk_bound <= 0.0:
                 return False
             motion = _profile(state, target, shrink * rate_bound, shrink * jerk_bound)
+            if motion.duration > LONGEST_CHANGE_S:  # shrinking would only lengthen it
+                return False
             covered = _end_tau(motion) - tau
             if covered > span and tau + span < self.duration:
                 span = 1.5 * covered
@@ -291,17 +390,17 @@ class FeedProfile:
         if np.any(feed < -1e-9) or np.any(feed > most_feed + 1e-9):
             return False
         steps = np.diff(rate) / np.maximum(np.diff(times), _TINY)
-        rate_change = np.maximum(np.abs(np.append(steps, 0.0)), np.abs(np.append(0.0, steps)))
         q1, q2, q3 = self._derivatives(np.minimum(tau, self.duration))
-        r, rd, rdd = feed[:, None], rate[:, None], rate_change[:, None]
+        r, rd = feed[:, None], rate[:, None]
+        before, after = np.append(0.0, steps)[:, None], np.append(steps, 0.0)[:, None]
         speed_limit, acceleration_limit, jerk_limit = self._allowed
         speed_ok = np.abs(q1 * r) <= speed_limit
         acceleration_ok = np.abs(q2 * r**2 + q1 * rd) <= np.maximum(
             acceleration_limit, np.abs(q2) * r**2
         )
-        jerk_ok = np.abs(q3) * r**3 + 3.0 * np.abs(q2 * r * rd) + np.abs(q1) * rdd <= np.maximum(
-            jerk_limit, np.abs(q3) * r**3
-        )
+        own = q3 * r**3 + 3.0 * q2 * r * rd
+        jerk = np.maximum(np.abs(own + q1 * before), np.abs(own + q1 * after))
+        jerk_ok = jerk <= np.maximum(jerk_limit, np.abs(q3) * r**3)
         return bool(np.all(speed_ok) and np.all(acceleration_ok) and np.all(jerk_ok))
 
     @staticmethod

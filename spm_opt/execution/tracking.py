@@ -15,8 +15,14 @@ robot file (``position_loop_gain_per_s``, ``velocity_loop_bandwidth_per_s``; ``s
 identify`` estimates them from a log).
 
 The following error is the measured position less the reference (the plan at the logged
-plan time), and it may grow with the commanded speed, as LinuxCNC's does:
-``max(min_error, max_error × |q̇| / q̇_limit)`` per joint.
+plan time), and it may grow with the speed, as LinuxCNC's does:
+``max(min_error, max_error × |q̇| / q̇_limit)`` per joint, q̇ the larger of the reference's
+rate and the measured one. LinuxCNC takes the commanded speed alone; but a joint that
+lags keeps its lag while the reference slows down (measured without the lead on
+``craniotomy_hardware.toml``: 0.31–0.64° where the reference had slowed to 0.06–0.10
+rad/s, the joint still moving faster), and the loop's lag follows the joint's own rate:
+Kp × error is its rate command. A stuck or blocked joint still trips it at the
+reference's speed.
 """
 
 from __future__ import annotations
@@ -69,11 +75,11 @@ class Lead:
 
 
 def following_error_limit(
-    reference_rate: np.ndarray, speed_limit: float, least: float, most: float
+    speed: np.ndarray, speed_limit: float, least: float, most: float
 ) -> np.ndarray:
     """The following error allowed per joint, rad: ``least`` at rest, growing in
-    proportion to the reference's speed to ``most`` at ``speed_limit`` (rad/s)."""
-    return np.maximum(least, most * np.abs(reference_rate) / speed_limit)
+    proportion to ``speed`` (rad/s) to ``most`` at ``speed_limit`` (rad/s)."""
+    return np.maximum(least, most * np.abs(speed) / speed_limit)
 
 
 def led_goals_outside(

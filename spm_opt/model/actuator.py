@@ -19,6 +19,9 @@ import numpy as np
 RPM = 2.0 * math.pi / 60.0
 """One revolution per minute in rad/s."""
 
+LOOP_RATE_RANGE_PER_S = (1.0, 10_000.0)
+"""The position loop gains and velocity loop bandwidths a robot file accepts, 1/s."""
+
 VELOCITY_LIMIT_UNITS = 8000
 """The control table's default Velocity Limit (address 32), velocity units: the largest
 rate command the position loop gives (15.9 rpm on the L54)."""

@@ -15,7 +15,7 @@ import tomli_w
 from spm_opt.errors import UnreachableError
 from spm_opt.fields import Table, apply_overrides, read_toml
 from spm_opt.model import kinematics
-from spm_opt.model.actuator import ACTUATORS, Actuator, CurrentTorqueMap
+from spm_opt.model.actuator import ACTUATORS, LOOP_RATE_RANGE_PER_S, Actuator, CurrentTorqueMap
 
 MM = 1e-3
 DEG = math.pi / 180.0
@@ -301,8 +301,9 @@ def _actuator(table: Table) -> Actuator:
 
 
 def _loop_rates(table: Table, key: str, default: tuple[float, float]) -> tuple[float, float]:
-    """A pair of loop rates, 1/s, each in [1, 10,000]."""
-    values = table.vector(key, length=2, minimum=1.0, maximum=10_000.0, default=np.array(default))
+    """A pair of loop rates, 1/s, each in :data:`LOOP_RATE_RANGE_PER_S`."""
+    low, high = LOOP_RATE_RANGE_PER_S
+    values = table.vector(key, length=2, minimum=low, maximum=high, default=np.array(default))
     return (float(values[0]), float(values[1]))
 
 

@@ -308,7 +308,7 @@ class _Design:
         """The coefficients (4H,) and the solver's statistics."""
         problem, settings, base = self.problem, self.settings, self.base
         robot = problem.robot
-        bounds = planner_bounds(problem, settings.margin)
+        bounds = planner_bounds(problem, settings.margin, hold_room=False)  # it cuts nothing
         x = ca.MX.sym("x", 2 * self.size)
         q, qd, qdd, jerk = self._motion(x)
         points = settings.points_per_period

@@ -13,7 +13,8 @@ cut's progress along its arc never negative at the node, and at the check points
 evaluator finds the cut running back between nodes, the joint speed exactly through q̇'s
 Bernstein coefficients, the load torque at the two Gauss points), is mapped over the grid; joint
 range, acceleration and jerk are bounds on the nodes and controls. Each limit keeps a
-reserve of ``margin``.
+reserve of ``margin``; the acceleration and jerk bounds also keep a feed hold its room
+(:func:`~spm_opt.limits.planner_bounds`, :mod:`spm_opt.hold_room`).
 
 Every plan clean, by construction: after each solve the evaluator re-measures the plan; if
 it finds a limit exceeded, each interval where the solution exceeds a bound between its
@@ -81,7 +82,7 @@ import numpy as np
 from spm_opt.bounds import segment_lower_bounds
 from spm_opt.errors import PlanningError
 from spm_opt.evaluate import Violation, evaluate
-from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds, planner_bounds
+from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds, contour_tube, planner_bounds
 from spm_opt.model import dynamics, torque_table
 from spm_opt.model.params import MM, Robot
 from spm_opt.planners.contour_guess import segment_motion
@@ -521,10 +522,12 @@ def _segment_durations(
 def _check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.ndarray:
     """Refuse what no solver can do, with the reason; return the segments' lower bounds."""
     limits, names = problem.limits, problem.visit_names
-    if limits.contour_tolerance is not None and limits.contour_tolerance < MIN_CONTOUR_TOLERANCE:
+    tube = contour_tube(problem)
+    if tube is not None and tube < MIN_CONTOUR_TOLERANCE:
         raise PlanningError(
-            f"contour_tolerance_mm = {limits.contour_tolerance / MM:g}: the cut would have to "
-            f"turn every corner exactly; give at least {MIN_CONTOUR_TOLERANCE / MM:g} mm"
+            f"contour_tolerance_mm = {limits.contour_tolerance / MM:g} less "
+            f"execution_reserve_mm = {limits.execution_reserve / MM:g}: the cut would have to "
+            f"turn every corner exactly; leave a plan at least {MIN_CONTOUR_TOLERANCE / MM:g} mm"
         )
     torque_limit = planner_bounds(problem, margin).load_torque
     for visit in (0, len(names) - 1):
@@ -1034,6 +1037,8 @@ _TIGHTENED = {  # the evaluator's rule: the bound that keeps it
     "joint acceleration": "joint_acceleration",
     "joint jerk": "joint_jerk",
     "acceleration step": "joint_jerk",
+    "hold acceleration": "joint_acceleration",
+    "hold jerk": "joint_jerk",
     "actuator torque": "load_torque",
     "motor current": "load_torque",
     "tool speed": "tool_speed",

@@ -43,7 +43,8 @@ triangle of acceleration): toppra is given that acceleration, or the limit if lo
 No limit is trusted to these arguments: the smoothed motion is measured (speeds,
 acceleration, torque with exact friction) and toppra runs again with the share of any
 exceeded limit cut by the excess; acceleration, torque and jerk keep ``margin`` in reserve
-from the start.
+from the start. The acceleration and jerk are the bounds that keep a feed hold its room
+(:func:`spm_opt.limits.planner_bounds`, :mod:`spm_opt.hold_room`).
 
 Trajectory. The averaged s(t) is one cubic per grid step, so samples at every grid time
 with q, q̇ = q' ṡ and q̈ = q' s̈ + q'' ṡ² carry every knot, and the quintic Hermite pieces
@@ -566,7 +567,7 @@ def _toppra_acceleration(
     jerk limit (rad/s³, None: unlimited) makes a gentler start faster (a = √(ω_c j), see
     the module docstring), with ω_c from the path tangents q' (2, 2), rad/mm, and the
     largest ṡ² (2,), mm²/s², at the segment's two ends."""
-    limit = problem.limits.max_joint_acceleration
+    limit = planner_bounds(problem, 0.0).joint_acceleration
     bound = None if limit is None else limit * shares.acceleration
     if jerk is None:
         return bound
@@ -591,7 +592,7 @@ class _Piece:
 
 def _jerk_bound(problem: Problem, settings: ToppraSettings) -> float | None:
     """The joint jerk the smoothing keeps within, rad/s³ (None: unlimited)."""
-    limit = problem.limits.max_joint_jerk
+    limit = planner_bounds(problem, 0.0).joint_jerk
     return None if limit is None else limit * (1.0 - settings.margin)
 
 
@@ -655,6 +656,7 @@ def _excess(problem: Problem, piece: _Piece) -> dict[str, float]:
     name: peak / limit. Torques from the model with exact friction, as the actuators
     deliver them."""
     limits, robot = problem.limits, problem.robot
+    acceleration = planner_bounds(problem, 0.0).joint_acceleration
     torque = dynamics.actuator_torque(robot, piece.q, piece.qd, piece.qdd)
     peaks = {
         "joint_speed": (np.max(np.abs(piece.qd)) / limits.max_joint_speed, _SPEED_SLACK),
@@ -663,8 +665,8 @@ def _excess(problem: Problem, piece: _Piece) -> dict[str, float]:
     if limits.max_tool_speed is not None:
         speed = problem.contour.joint_tool_speed(piece.q, piece.qd)
         peaks["tool_speed"] = (np.max(speed) / limits.max_tool_speed, _SPEED_SLACK)
-    if limits.max_joint_acceleration is not None:
-        peaks["acceleration"] = (np.max(np.abs(piece.qdd)) / limits.max_joint_acceleration, 0.0)
+    if acceleration is not None:
+        peaks["acceleration"] = (np.max(np.abs(piece.qdd)) / acceleration, 0.0)
     return {name: float(peak) for name, (peak, slack) in peaks.items() if peak > 1.0 + slack}
 
 

@@ -18,7 +18,10 @@ Three comparisons, as in the paper:
 A run the operator held or overrode (the feed) is compared at what was commanded: the plan
 at each row's logged plan time and feed, against run time since the plan phase began; the
 figures shade the holds, and the report lists them from the header's feed events. The
-executed cut (the measured joints on the skull) is compared with the plan's cut.
+executed cut (the measured joints on the skull) is compared with the plan's cut, and
+judged by the problem's rules as a plan is (:mod:`spm_opt.evaluate_execution`): the
+measured cut, and, given the plant's true state (a simulated robot's or the emulator's
+trace), the true cut.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from spm_opt.errors import InputError
+from spm_opt.evaluate_execution import LogReports, evaluate_log, tracking_error
 from spm_opt.execution.log import read_log
 from spm_opt.files import write_atomically
 from spm_opt.model import dynamics, kinematics
@@ -204,8 +208,7 @@ def compare_torques(problem: Problem, samples: RunSamples) -> TorqueComparison:
 
 def compare_tracking(samples: RunSamples) -> TrackingComparison:
     """How far the measured joints were from the plan, deg."""
-    error = (samples.measured_q - samples.planned_q) / DEG
-    return TrackingComparison(np.max(np.abs(error), axis=0).tolist(), _rms(error))
+    return TrackingComparison(*tracking_error(samples.measured_q, samples.planned_q))
 
 
 def capture_run(problem: Problem, samples: RunSamples, seed: int = 0) -> tuple[Capture, np.ndarray]:
@@ -499,15 +502,22 @@ def capture_figure(
 
 
 def write_verification(
-    problem: Problem, trajectory: Trajectory, log_path: Path, out: Path, seed: int = 0
+    problem: Problem,
+    trajectory: Trajectory,
+    log_path: Path,
+    out: Path,
+    seed: int = 0,
+    trace_path: Path | None = None,
 ) -> list[Path]:
-    """Analyse a run's log and write the report and figures into ``out`` (all or none).
+    """Analyse a run's log (and the plant's true state in ``trace_path``, if given) and
+    write the report and figures into ``out`` (all or none).
 
     Files: ``hardware_verification.md`` and ``.json`` (the three comparisons, the holds
-    and overrides, the executed cut's deviation), ``fig15_tracking.png``,
+    and overrides, the executed cut's deviation and its judgement), ``fig15_tracking.png``,
     ``fig19_torque_theta1.png``, ``fig20_torque_theta2.png``, ``fig25_motion_capture.png``,
     ``executed_cut.png``.
     """
+    judged = evaluate_log(problem, log_path, trace_path)
     log, header = read_log(log_path)
     samples = RunSamples.from_log(trajectory, log)
     capture, landmarks = capture_run(problem, samples, seed)
@@ -519,13 +529,19 @@ def write_verification(
         compare_torques(problem, samples), compare_tracking(samples), mocap
     )
     summary.update(feed_summary(holds, override_count(events), cut))
+    summary["judged"] = {
+        "measured": judged.measured.to_dict(),
+        "true": None if judged.true is None else judged.true.to_dict(),
+    }
     summary["run"] = {key: header.get(key) for key in ("completed", "reason", "samples", "loop")}
     backend = header.get("backend", {})
     summary["run"]["backend"] = backend.get("backend")
     summary["run"]["plant_robot"] = backend.get("plant_robot")  # the simulated robot's
     files = {
         out / "hardware_verification.json": json.dumps(summary, indent=2) + "\n",
-        out / "hardware_verification.md": _markdown(problem, summary),
+        out / "hardware_verification.md": _markdown(problem, summary)
+        + "\n"
+        + _judged_markdown(judged),
         out / "fig15_tracking.png": to_png(tracking_figure(samples)),
         out / "fig19_torque_theta1.png": to_png(torque_figure(problem, samples, 0)),
         out / "fig20_torque_theta2.png": to_png(torque_figure(problem, samples, 1)),
@@ -616,3 +632,52 @@ def _hold_row(number: int, hold: dict[str, Any]) -> list[str]:
         seconds(hold["to_rest_s"]),
         lasted,
     ]
+
+
+def _judged_markdown(judged: LogReports) -> str:
+    """The executed cut judged by the problem's rules: the measured cut's figures beside
+    the true cut's (when a trace was given), then each one's violations."""
+    reports = {"measured": judged.measured, "true": judged.true}
+    reports = {name: report for name, report in reports.items() if report is not None}
+
+    def figure(name: str, value: Any) -> list[str]:
+        return [name, *(_format_figure(getattr(r, value)) for r in reports.values())]
+
+    rows = [
+        figure("max contour deviation, mm", "max_contour_deviation_mm"),
+        figure("RMS contour deviation, mm", "rms_contour_deviation_mm"),
+        figure("max landmark error, mm", "max_landmark_error_mm"),
+        figure("coverage gap, mm", "coverage_gap_mm"),
+        figure("max backtrack, mm", "max_backtrack_mm"),
+        figure("max tracking error θ1, θ2, deg", "max_tracking_error_deg"),
+        figure("RMS tracking error θ1, θ2, deg", "rms_tracking_error_deg"),
+    ]
+    for k, visit in enumerate(judged.measured.landmark_errors_mm):
+        errors = [f"{r.landmark_errors_mm[k]['error_mm']:.4f}" for r in reports.values()]
+        rows.append([f"landmark {visit['landmark']} error, mm", *errors])
+    rows.append(["violations", *(str(len(r.violations)) for r in reports.values())])
+    lines = [
+        "## The executed cut, judged",
+        "",
+        "By the problem's rules, as a plan is judged (`spm-opt evaluate PROBLEM LOG.csv`), "
+        "from the plan's start to the log's end"
+        + (
+            "; the true cut is the plant's own angles, without the encoder offsets the "
+            "measured ones carry."
+            if judged.true is not None
+            else "."
+        ),
+        "",
+        *markdown_table(["figure", *(f"{name} cut" for name in reports)], rows),
+        "",
+    ]
+    for name, report in reports.items():
+        broken = [f"- {v}" for v in report.violations] or ["- none"]
+        lines += [f"Violations of the {name} cut:", "", *broken, ""]
+    return "\n".join(lines)
+
+
+def _format_figure(value: Any) -> str:
+    if isinstance(value, list):
+        return ", ".join(f"{v:.4f}" for v in value)
+    return f"{value:.4f}"

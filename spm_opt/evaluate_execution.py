@@ -1,0 +1,434 @@
+"""The executed cut, judged: an execution log by the same rules as a plan.
+
+:func:`evaluate_log` reads a log of :mod:`spm_opt.execution` (its CSV and the JSON header
+beside it) and judges the run with :func:`spm_opt.evaluate.judge`, the plan's own
+judgement, against the problem's full contour tolerance:
+
+- **Which rows.** From the first row of the plan phase to the log's end (the plan, then the
+  settle, or the stop and the hold after a fault); the approach is no part of the cut.
+  Rows whose read failed (every measured value empty) are left out and counted. A run that
+  did not complete, or whose log a crash cut short (a header without an outcome), is
+  judged all the same, and the report says so.
+- **The cut** from the measured angles: contour deviation, landmark visits (searched on the
+  samples, each measured on the straight segments to the nearest sample's neighbours, as
+  the log does not know where the cut was between samples), coverage, backtracking. The
+  tool speed is judged against the problem's limit times the feed in force, never less
+  than 1: in the plan phase the largest feed logged over the last :data:`FEED_SPAN_S`
+  (the tool lags the reference a little as the feed falls), outside it (the settle, the
+  stop after a fault: no feed is logged) the largest feed logged in the run. A feed below
+  1 does not tighten the limit: the problem's limit is what protects the cut, and a robot
+  coming to rest in a hold, at a feed near 0, would break any limit scaled by it.
+- **The robot** from the measured motion: joint range, speed (the measured velocity),
+  acceleration and jerk, torque and current (the measured current and the torque the
+  current map gives for it), singularity margin. Acceleration and jerk are the first and
+  second derivatives of the measured velocity by a quadratic Savitzky–Golay filter, over
+  :data:`ACCELERATION_SPAN_S` and :data:`JERK_SPAN_S` (5 and 11 samples at 100 Hz), on a
+  uniform grid at the loop's period (the velocity interpolated there where a row is late
+  or missing). A quadratic filter's derivatives are weighted averages of the true ones
+  with positive weights, so smoothing never raises a peak (a cubic one over 0.1 s overshot the
+  toppra plan's 9.91 rad/s² by 2 %): it rounds short peaks off instead (that plan of
+  ``craniotomy_hardware.toml``, logged as planned at 100 Hz, peaks at 9.91 rad/s² and
+  97.4 rad/s³; planned: 9.91 and 98.7). The noise floor: the velocity's quantum
+  (0.00199234 rpm) leaves at most 0.0063 rad/s² and 0.20 rad/s³ (the filters' gains on
+  half a quantum), RMS 0.0019 and 0.041 for an even rounding error; on the simulated robot
+  driving ``prototype_plant.toml`` at 100 Hz (that problem's toppra, ruckig and cubic
+  plans), the smoothed measured derivatives differ from the same filters on the plant's
+  true velocity by at most 0.006 rad/s² and 0.15 rad/s³, RMS 0.002 and 0.04. (Second and
+  third differences of the position, quantised to 2π/361,384 rad, would move by 0.17
+  rad/s² and 17 rad/s³ per pulse.) A step in acceleration shows as jerk: a log's
+  ``max_acceleration_step_rad_s2`` is None.
+- **Tracking:** the measured position less the reference (the plan at the logged plan
+  time), its largest magnitude and RMS per joint over the plan phase.
+
+With the plant's true state (``StateTrace``, from ``spm-opt execute --backend sim --trace``
+or ``spm-opt emulate --trace``) the same judge runs on the true angles, rates and currents
+interpolated at the log's times: the true cut is what the surgeon gets. The true angles
+lack the encoder offsets the measured ones carry (the position loops hold the encoders'
+reading at the goal, so the measured cut can look better than the true one).
+
+A log is judged under the problem it ran under (the header's ``problem`` fingerprint):
+another gives a one-line :class:`~spm_opt.errors.InputError` unless ``other_problem``.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy.signal import savgol_filter
+
+from spm_opt.errors import InputError
+from spm_opt.evaluate import Motion, Report, judge
+from spm_opt.execution.log import header_path, read_log
+from spm_opt.execution.plant import StateTrace
+from spm_opt.limits import contour_tube, path_tolerance
+from spm_opt.model.params import DEG
+from spm_opt.problem import Problem
+
+ACCELERATION_SPAN_S = 0.04
+JERK_SPAN_S = 0.1
+"""Spans of the Savitzky–Golay filters that give acceleration and jerk, s, from the first
+sample to the last (an odd number of samples: 5 and 11 at 100 Hz)."""
+
+ORDER = 2
+"""Polynomial order of the Savitzky–Golay filters."""
+
+FEED_SPAN_S = 0.1
+"""How long a fall of the feed takes to lower the feed in force, s."""
+
+JOINTS = ("theta1", "theta2")
+MEASURED = tuple(
+    f"{kind}_{joint}_{unit}"
+    for kind, unit in (("position", "rad"), ("velocity", "rad_s"), ("current", "a"))
+    for joint in JOINTS
+) + tuple(f"torque_{joint}_nm" for joint in JOINTS)
+"""The columns a read fills: all empty in a row whose read failed."""
+
+REFERENCE = tuple(f"reference_{joint}_rad" for joint in JOINTS)
+TIME_TOLERANCE_S = 1e-6
+"""How far a trace may fall short of the log's first and last times, s (the log writes
+times to the ns)."""
+
+
+@dataclass(frozen=True)
+class ExecutionReport(Report):
+    """A :class:`~spm_opt.evaluate.Report` of an executed run, and how it went.
+
+    Attributes
+    ----------
+    angles : str
+        Whose angles were judged: "measured" (the encoders') or "true" (the plant's).
+    completed : bool
+        The run ran its plan to the end (False after a fault, or a log a crash cut short).
+    outcome : str
+        The header's reason, or why there is none.
+    rows_judged : int
+        Rows from the plan's start to the log's end that were judged.
+    failed_reads_skipped : int
+        Rows in that stretch whose read failed (no measured values): left out.
+    max_tracking_error_deg, rms_tracking_error_deg : list of float, deg
+        The angles less the reference (the plan at the logged plan time), per joint, over
+        the plan phase.
+    smoothing_spans_s : list of float, s
+        The spans of the filters that gave acceleration and jerk.
+    """
+
+    angles: str = "measured"
+    completed: bool = True
+    outcome: str = ""
+    rows_judged: int = 0
+    failed_reads_skipped: int = 0
+    max_tracking_error_deg: list[float] = field(default_factory=list)
+    rms_tracking_error_deg: list[float] = field(default_factory=list)
+    smoothing_spans_s: list[float] = field(
+        default_factory=lambda: [ACCELERATION_SPAN_S, JERK_SPAN_S]
+    )
+
+    def _notes(self) -> list[str]:
+        notes = super()._notes()
+        if self.angles == "true":
+            notes.append(
+                "The plant's true angles: without the encoder offsets the measured ones carry."
+            )
+        if not self.completed:
+            notes.append(f"The run did not complete ({self.outcome}).")
+        if self.failed_reads_skipped:
+            notes.append(f"{self.failed_reads_skipped} row(s) whose read failed are left out.")
+        return notes
+
+
+@dataclass(frozen=True)
+class LogReports:
+    """The judgement of a run: of the measured angles, and of the plant's true ones when
+    a trace was given (else None)."""
+
+    measured: ExecutionReport
+    true: ExecutionReport | None
+
+
+@dataclass(frozen=True)
+class _Run:
+    """The judged rows of a log: times (N,), s; whether each is in the plan phase; the
+    references (N, 2), rad; the feed in force (N,); the measured values by column."""
+
+    t: np.ndarray
+    in_plan: np.ndarray
+    reference: np.ndarray
+    feed: np.ndarray
+    measured: dict[str, np.ndarray]
+    period_s: float
+    skipped: int
+    header: dict[str, Any]
+
+
+def is_execution_log(path: str | Path) -> bool:
+    """Whether the CSV at ``path`` is an execution log rather than a trajectory: its first
+    line names a log's ``time_s`` or ``phase`` column (False if it cannot be read)."""
+    try:
+        with open(path, encoding="utf-8") as file:
+            columns = file.readline().strip().split(",")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return "time_s" in columns or "phase" in columns
+
+
+def evaluate_log(
+    problem: Problem,
+    log: str | Path,
+    trace: str | Path | None = None,
+    *,
+    other_problem: bool = False,
+) -> LogReports:
+    """Judge the run an execution log records (see the module's docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+        The problem the run ran under.
+    log : path
+        The log's CSV; its JSON header lies beside it.
+    trace : path, optional
+        The plant's true state (``.npz``) over the run: then the true cut is judged too.
+    other_problem : bool
+        Judge the log under ``problem`` though it ran under another.
+    """
+    run = _read_run(Path(log), problem, other_problem)
+    measured = run.measured
+    q = np.column_stack([measured[f"position_{j}_rad"] for j in JOINTS])
+    qd = np.column_stack([measured[f"velocity_{j}_rad_s"] for j in JOINTS])
+    current = np.column_stack([measured[f"current_{j}_a"] for j in JOINTS])
+    torque = np.column_stack([measured[f"torque_{j}_nm"] for j in JOINTS])
+    judged = _judge(problem, run, q, qd, current, torque, "measured")
+    if trace is None:
+        return LogReports(judged, None)
+    state = _true_state(Path(trace), run)
+    current = state["current_a"]
+    torque = problem.robot.actuator.current_map.torque(current)
+    true = _judge(
+        problem, run, state["position_rad"], state["velocity_rad_s"], current, torque, "true"
+    )
+    return LogReports(judged, true)
+
+
+def tracking_error(angles: np.ndarray, reference: np.ndarray) -> tuple[list[float], list[float]]:
+    """The largest magnitude and the RMS, deg, per joint of ``angles`` less ``reference``
+    (N, 2), rad."""
+    error = (angles - reference) / DEG
+    return np.max(np.abs(error), axis=0).tolist(), np.sqrt(np.mean(error**2, axis=0)).tolist()
+
+
+def smoothed_derivatives(
+    t: np.ndarray, rate: np.ndarray, period_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The first and second derivatives (N, k) of rates (N, k) sampled at times t (N,), s:
+    quadratic Savitzky–Golay filters over :data:`ACCELERATION_SPAN_S` and
+    :data:`JERK_SPAN_S` on a uniform grid at ``period_s`` (s; the rates interpolated onto
+    it), read back at t."""
+    count = int(np.floor((t[-1] - t[0]) / period_s + 0.5)) + 1
+    grid = t[0] + period_s * np.arange(count)
+    uniform = np.column_stack([np.interp(grid, t, column) for column in rate.T])
+    derivatives = []
+    # at the ends, the rate held (acceleration) and the end window's own fit (jerk): each
+    # still a positive average of the true derivative, as in the middle
+    for order, span, mode in ((1, ACCELERATION_SPAN_S, "nearest"), (2, JERK_SPAN_S, "interp")):
+        width = max(2 * int(round(span / period_s / 2.0)) + 1, ORDER + 1)
+        if count < width:
+            raise InputError(
+                f"only {t[-1] - t[0]:.3f} s from the plan's start to the log's end: the "
+                f"judge smooths over {width} samples at {1.0 / period_s:g} Hz"
+            )
+        smooth = savgol_filter(
+            uniform, width, ORDER, deriv=order, delta=period_s, axis=0, mode=mode
+        )
+        derivatives.append(np.column_stack([np.interp(t, grid, c) for c in smooth.T]))
+    return derivatives[0], derivatives[1]
+
+
+def _judge(
+    problem: Problem,
+    run: _Run,
+    q: np.ndarray,
+    qd: np.ndarray,
+    current: np.ndarray,
+    torque: np.ndarray,
+    angles: str,
+) -> ExecutionReport:
+    """One judgement of the run's rows with these angles, rates, currents and torques."""
+    qdd, jerk = smoothed_derivatives(run.t, qd, run.period_s)
+    header = run.header
+    plan = header.get("plan") or {}
+    report = judge(
+        problem,
+        Motion(run.t, q, qd, qdd, jerk, torque, current),
+        contour_tube(problem, executed=True),  # the reserve is the executed cut's
+        path_tolerance(problem, executed=True),
+        planner=plan.get("planner"),
+        duration=float(run.t[-1] - run.t[0]),
+        feed=run.feed,
+        between_samples=True,
+        contour_judged=not plan.get("ignores_contour", False),
+    )
+    largest, rms = tracking_error(q[run.in_plan], run.reference[run.in_plan])
+    completed = bool(header.get("completed", False))
+    if "completed" in header:
+        outcome = str(header.get("reason", ""))
+    else:
+        outcome = "no outcome in its header: the log was cut short, by a crash?"
+    return ExecutionReport(
+        **{f.name: getattr(report, f.name) for f in fields(Report)},
+        angles=angles,
+        completed=completed,
+        outcome=outcome,
+        rows_judged=len(run.t),
+        failed_reads_skipped=run.skipped,
+        max_tracking_error_deg=largest,
+        rms_tracking_error_deg=rms,
+    )
+
+
+def _read_run(path: Path, problem: Problem, other_problem: bool) -> _Run:
+    """The log's judged rows, each checked; one-line :class:`InputError` on a bad log."""
+    try:
+        table, header = read_log(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        raise InputError(f"log {path}: not a CSV log ({str(error).splitlines()[0]})") from None
+    except json.JSONDecodeError as error:
+        raise InputError(
+            f"log {path}: its header {header_path(path).name} is not JSON ({error})"
+        ) from None
+    if not header:
+        raise InputError(
+            f"log {path}: no header {header_path(path).name} beside it (spm-opt execute "
+            "writes the two together)"
+        )
+    _check_made_under(problem, header, other_problem, path)
+    phase = table["phase"].astype(str).to_numpy()
+    plan_rows = np.flatnonzero(phase == "plan")
+    if plan_rows.size == 0:
+        raise InputError(f"log {path}: no plan rows (the run stopped before its plan began)")
+    rows = table.iloc[plan_rows[0] :]
+    phase = phase[plan_rows[0] :]
+    in_plan = phase == "plan"
+    lines = rows.index.to_numpy() + 2  # the CSV's line of each row
+    t = _numbers(rows, "time_s", path, lines, np.ones(len(rows), bool))
+    if np.any(np.diff(t) <= 0.0):
+        bad = int(np.argmax(np.diff(t) <= 0.0)) + 1
+        raise InputError(f"log {path}: line {lines[bad]}: time_s does not increase")
+    feed = _numbers(rows, "feed", path, lines, in_plan)
+    reference = np.column_stack([_numbers(rows, c, path, lines, in_plan) for c in REFERENCE])
+    values = {c: pd.to_numeric(rows[c], errors="coerce").to_numpy(float) for c in MEASURED}
+    empty = np.column_stack([np.isnan(v) for v in values.values()])
+    read = ~np.all(empty, axis=1)
+    broken = read & np.any(~np.isfinite(np.column_stack(list(values.values()))), axis=1)
+    if np.any(broken):
+        row = int(np.argmax(broken))
+        column = next(c for c in MEASURED if not np.isfinite(values[c][row]))
+        raise InputError(
+            f"log {path}: line {lines[row]}: {column} is {_shown(rows[column].iloc[row])} "
+            "though the row's read did not fail (its other measured values are there)"
+        )
+    if np.sum(read) < 2:
+        raise InputError(f"log {path}: fewer than 2 rows with measured values from the plan on")
+    settings = header.get("settings") or {}
+    rate = settings.get("rate_hz")
+    period = 1.0 / rate if rate else float(np.median(np.diff(t[read])))
+    return _Run(
+        t=t[read],
+        in_plan=in_plan[read],
+        reference=reference[read],
+        feed=_feed_in_force(feed, in_plan, period)[read],
+        measured={c: v[read] for c, v in values.items()},
+        period_s=period,
+        skipped=int(np.sum(~read)),
+        header=header,
+    )
+
+
+def _numbers(
+    rows: pd.DataFrame, column: str, path: Path, lines: np.ndarray, needed: np.ndarray
+) -> np.ndarray:
+    """A column as floats; a value that is not a finite number where ``needed`` is an
+    error naming its line."""
+    values = pd.to_numeric(rows[column], errors="coerce").to_numpy(float)
+    bad = needed & ~np.isfinite(values)
+    if np.any(bad):
+        row = int(np.argmax(bad))
+        raise InputError(
+            f"log {path}: line {lines[row]}: {column} is {_shown(rows[column].iloc[row])}, "
+            "expected a number"
+        )
+    return values
+
+
+def _shown(value: Any) -> str:
+    """A CSV value for a message: empty and NaN alike are "empty or NaN"."""
+    return "empty or NaN" if pd.isna(value) else repr(str(value))
+
+
+def _feed_in_force(feed: np.ndarray, in_plan: np.ndarray, period_s: float) -> np.ndarray:
+    """The feed the tool speed limit is scaled by at each row (see the module's
+    docstring): at least 1; in the plan phase the largest feed over the last
+    :data:`FEED_SPAN_S`, elsewhere the largest feed logged."""
+    width = max(1, int(round(FEED_SPAN_S / period_s)) + 1)
+    recent = pd.Series(np.where(in_plan, feed, np.nan)).rolling(width, min_periods=1).max()
+    force = np.where(in_plan, recent.to_numpy(), np.nanmax(feed[in_plan]))
+    return np.maximum(force, 1.0)
+
+
+def _check_made_under(
+    problem: Problem, header: dict[str, Any], other_problem: bool, path: Path
+) -> None:
+    """Refuse a log whose header does not record ``problem``'s fingerprint, unless
+    ``other_problem``."""
+    recorded = header.get("problem")
+    fingerprint = recorded.get("fingerprint") if isinstance(recorded, dict) else None
+    if fingerprint == problem.fingerprint or other_problem:
+        return
+    if fingerprint is None:
+        why = "its header records no problem it ran under"
+    else:
+        name = recorded.get("name") or "another problem"
+        why = (
+            f"it ran under {name} (fingerprint {str(fingerprint)[:12]}), not under "
+            f"{problem.name} ({problem.fingerprint[:12]}): their landmarks, limits or robot "
+            "differ"
+        )
+    raise InputError(
+        f"log {path} refused: {why}; judge it under the problem it ran under, or allow it "
+        "with --other-problem"
+    )
+
+
+def _true_state(path: Path, run: _Run) -> dict[str, np.ndarray]:
+    """The plant's true position, velocity and current (N, 2) at the run's times, from a
+    :class:`StateTrace` file on the log's clock."""
+    origin = run.header.get("clock_origin_s")
+    if origin is None:
+        raise InputError("--trace: the log's header has no clock_origin_s to align it with")
+    if not path.is_file():
+        raise InputError(f"trace {path}: no such file")
+    try:
+        trace = StateTrace.load(path, float(origin))
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        raise InputError(
+            f"trace {path}: not a trace of the plant's state (an .npz of "
+            f"{', '.join(StateTrace.FIELDS)}, as spm-opt execute --backend sim --trace and "
+            "spm-opt emulate --trace write)"
+        ) from None
+    times = trace["time_s"]
+    first, last = run.t[0], run.t[-1]
+    if len(times) < 2 or times[0] > first + TIME_TOLERANCE_S or times[-1] < last - TIME_TOLERANCE_S:
+        span = f"{times[0]:.3f} to {times[-1]:.3f} s" if len(times) else "no time"
+        raise InputError(
+            f"trace {path}: covers {span} of the log's clock, not the judged rows' "
+            f"{first:.3f} to {last:.3f} s; is it this run's trace?"
+        )
+    return {
+        name: np.column_stack([np.interp(run.t, times, trace[name][:, j]) for j in range(2)])
+        for name in ("position_rad", "velocity_rad_s", "current_a")
+    }
