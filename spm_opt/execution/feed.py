@@ -142,18 +142,12 @@ def feed_ceiling(
     if most <= 1.0:
         return most
     kept = {v.rule for v in evaluate(problem, trajectory).violations}
-    robot = problem.robot
 
     def allowed(rate: float) -> bool:
         scaled = trajectory.time_scaled(rate)
         if not {v.rule for v in evaluate(problem, scaled).violations} <= kept:
             return False
-        if lead is None:
-            return True
-        t = scaled.time_grid()
-        states = scaled.states(t)
-        limit = robot.actuator.velocity_limit_rad_s
-        return not led_goals_outside(lead, states, t, robot.joint_range, limit)
+        return lead is None or not led_goals_outside(lead, scaled, problem.robot)
 
     if allowed(most):
         return most

@@ -88,14 +88,7 @@ def check_plan(
     low, high = problem.robot.joint_range[:, 0], problem.robot.joint_range[:, 1]
     if np.any(start < low) or np.any(start > high):
         raise PreflightError(f"plan refused: its start {degrees(start)} is out of range")
-    t = trajectory.time_grid()
-    outside = led_goals_outside(
-        lead,
-        trajectory.states(t),
-        t,
-        problem.robot.joint_range,
-        problem.robot.actuator.velocity_limit_rad_s,
-    )
+    outside = led_goals_outside(lead, trajectory, problem.robot)
     if outside:
         raise PreflightError(f"plan refused: {outside} (use --tracking none, or plan slower)")
     if allowed:

@@ -33,6 +33,8 @@ import numpy as np
 
 from spm_opt.limits import RULES
 from spm_opt.model.actuator import Actuator
+from spm_opt.model.params import Robot
+from spm_opt.trajectory import Trajectory
 
 TRACKING_MODES = ("lead", "none")
 """``lead``: goals lead the loop's lag; ``none``: the goal is the reference itself."""
@@ -82,18 +84,13 @@ def following_error_limit(
     return np.maximum(least, most * np.abs(speed) / speed_limit)
 
 
-def led_goals_outside(
-    lead: Lead,
-    states: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    times: np.ndarray,
-    joint_range: np.ndarray,
-    velocity_limit: float,
-) -> str:
-    """Why the goals led from a reference leave the joint range or outrun the actuators'
-    Velocity Limit ("" if they do neither). ``states``: positions, rates, accelerations
-    and jerks (n, 2) at ``times`` (s); ``joint_range`` (2, 2), rad; ``velocity_limit``,
-    rad/s, allowed the evaluator's 0.5 %."""
-    position, rate, acceleration, jerk = states
+def led_goals_outside(lead: Lead, trajectory: Trajectory, robot: Robot) -> str:
+    """Why the goals led from ``trajectory`` (on the evaluator's grid) leave ``robot``'s
+    joint range or outrun its actuators' Velocity Limit ("" if they do neither; the limit
+    allowed the evaluator's 0.5 %)."""
+    times = trajectory.time_grid()
+    position, rate, acceleration, jerk = trajectory.states(times)
+    joint_range, velocity_limit = robot.joint_range, robot.actuator.velocity_limit_rad_s
     goals = lead.goal(position, rate, acceleration)
     for joint in range(2):
         low, high = joint_range[joint]
