@@ -52,7 +52,7 @@ another gives a one-line :class:`~spm_opt.errors.InputError` unless ``other_prob
 
 from __future__ import annotations
 
-import json
+import math
 import zipfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -64,8 +64,15 @@ from scipy.signal import savgol_filter
 
 from spm_opt.errors import InputError
 from spm_opt.evaluate import Motion, Report, judge
-from spm_opt.execution.log import header_path, read_log
+from spm_opt.execution.log import header_path
 from spm_opt.execution.plant import StateTrace
+from spm_opt.input_limits import (
+    MAX_HEADER_CHARS,
+    MAX_TRACE_BYTES,
+    check_file,
+    excerpt,
+    read_execution_log,
+)
 from spm_opt.limits import contour_tube, path_tolerance
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
@@ -168,10 +175,13 @@ class _Run:
 
 def is_execution_log(path: str | Path) -> bool:
     """Whether the CSV at ``path`` is an execution log rather than a trajectory: its first
-    line names a log's ``time_s`` or ``phase`` column (False if it cannot be read)."""
+    line names a log's ``time_s`` or ``phase`` column (False if it cannot be read, or is
+    no regular file: a pipe's reading could block)."""
+    if not Path(path).is_file():
+        return False
     try:
         with open(path, encoding="utf-8") as file:
-            columns = file.readline().strip().split(",")
+            columns = file.readline(MAX_HEADER_CHARS).strip().split(",")
     except (OSError, UnicodeDecodeError):
         return False
     return "time_s" in columns or "phase" in columns
@@ -293,19 +303,13 @@ def _judge(
 
 def _read_run(path: Path, problem: Problem, other_problem: bool) -> _Run:
     """The log's judged rows, each checked; one-line :class:`InputError` on a bad log."""
-    try:
-        table, header = read_log(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
-        raise InputError(f"log {path}: not a CSV log ({str(error).splitlines()[0]})") from None
-    except json.JSONDecodeError as error:
-        raise InputError(
-            f"log {path}: its header {header_path(path).name} is not JSON ({error})"
-        ) from None
+    table, header = read_execution_log(path)
     if not header:
         raise InputError(
             f"log {path}: no header {header_path(path).name} beside it (spm-opt execute "
             "writes the two together)"
         )
+    _check_header(path, header)
     _check_made_under(problem, header, other_problem, path)
     phase = table["phase"].astype(str).to_numpy()
     plan_rows = np.flatnonzero(phase == "plan")
@@ -347,6 +351,36 @@ def _read_run(path: Path, problem: Problem, other_problem: bool) -> _Run:
         skipped=int(np.sum(~read)),
         header=header,
     )
+
+
+def _check_header(path: Path, header: dict[str, Any]) -> None:
+    """Refuse a header whose parts the judge reads are of the wrong kind (a JSON file of
+    another kind beside the log): ``plan`` and ``settings`` objects, the loop's rate
+    positive, the clock's origin a number."""
+    settings = header.get("settings") or {}
+    wrong = [
+        (key, header[key])
+        for key in ("plan", "settings")
+        if not isinstance(header.get(key) or {}, dict)
+    ]
+    if isinstance(settings, dict) and not _number_or_none(settings.get("rate_hz"), positive=True):
+        wrong.append(("settings.rate_hz", settings["rate_hz"]))
+    if not _number_or_none(header.get("clock_origin_s")):
+        wrong.append(("clock_origin_s", header["clock_origin_s"]))
+    if wrong:
+        key, value = wrong[0]
+        raise InputError(
+            f"log {path}: its header {header_path(path).name}: {key} = {excerpt(value)}: not "
+            "as spm-opt execute writes it; is it this log's header?"
+        )
+
+
+def _number_or_none(value: Any, positive: bool = False) -> bool:
+    """Whether ``value`` is None or a finite number (positive, if asked)."""
+    if value is None:
+        return True
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    return number and math.isfinite(value) and (value > 0 or not positive)
 
 
 def _numbers(
@@ -404,17 +438,28 @@ def _check_made_under(
     )
 
 
+def _trace_shaped(trace: dict[str, np.ndarray]) -> bool:
+    """Whether a trace's arrays are those :class:`StateTrace` saves: numbers, the times
+    (N,), the rest (N, 2)."""
+    shapes = {name: (len(trace["time_s"]),) + (() if name == "time_s" else (2,)) for name in trace}
+    return all(
+        trace[name].shape == shape and np.issubdtype(trace[name].dtype, np.number)
+        for name, shape in shapes.items()
+    )
+
+
 def _true_state(path: Path, run: _Run) -> dict[str, np.ndarray]:
     """The plant's true position, velocity and current (N, 2) at the run's times, from a
     :class:`StateTrace` file on the log's clock."""
     origin = run.header.get("clock_origin_s")
     if origin is None:
         raise InputError("--trace: the log's header has no clock_origin_s to align it with")
-    if not path.is_file():
-        raise InputError(f"trace {path}: no such file")
+    check_file(path, "a trace of the plant's state (.npz)", MAX_TRACE_BYTES)
     try:
         trace = StateTrace.load(path, float(origin))
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        if not _trace_shaped(trace):
+            raise ValueError("not a trace's arrays")
+    except (OSError, EOFError, ValueError, TypeError, KeyError, zipfile.BadZipFile):
         raise InputError(
             f"trace {path}: not a trace of the plant's state (an .npz of "
             f"{', '.join(StateTrace.FIELDS)}, as spm-opt execute --backend sim --trace and "

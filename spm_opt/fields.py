@@ -9,33 +9,56 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 import tomllib
 from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from spm_opt.errors import InputError
+from spm_opt.input_limits import (
+    MAX_TOML_BYTES,
+    check_toml_data,
+    check_toml_nesting,
+    decode_text,
+    excerpt,
+    read_bytes,
+)
 
 _REQUIRED = object()
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
-    """Parse a TOML file, turning every way of failing into an :class:`InputError`."""
+    """Parse a TOML file of at most :data:`~spm_opt.input_limits.MAX_TOML_BYTES`, turning
+    every way of failing into an :class:`InputError`."""
     path = Path(path)
+    text = decode_text(read_bytes(path, "a TOML file", MAX_TOML_BYTES), path, "a TOML file")
+    if not text.strip():
+        raise InputError(f"{path}: empty file; expected a TOML file")
+    return parse_toml(text, str(path))
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """Parse TOML ``text`` (from ``source``, for messages) within the limits of
+    :mod:`spm_opt.input_limits`: its size and nesting checked before ``tomllib`` sees it,
+    its arrays, keys and strings after; every way of failing is an :class:`InputError`."""
+    if len(text) > MAX_TOML_BYTES:
+        raise InputError(
+            f"{source}: {len(text):,} characters; expected at most {MAX_TOML_BYTES:,} bytes"
+        )
+    check_toml_nesting(text, source)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, expected a TOML file") from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(f"{path}: cannot be read ({error})") from None
-    try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
-        raise InputError(f"{path}: not valid TOML: {error}") from None
+        raise InputError(f"{source}: not valid TOML: {error}") from None
+    except ValueError as error:  # an integer of more digits than Python converts
+        raise InputError(f"{source}: not valid TOML: {str(error).split(':')[0]}") from None
+    check_toml_data(data, source)
+    return data
 
 
 def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any], source: str) -> None:
@@ -56,8 +79,42 @@ def apply_overrides(data: dict[str, Any], overrides: Mapping[str, Any], source: 
 
 
 def _describe(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    """A short excerpt of ``value`` for a message (:func:`~spm_opt.input_limits.excerpt`)."""
+    return excerpt(value)
+
+
+@dataclass(frozen=True)
+class KeyRecord:
+    """One key a :class:`Table` was asked for, as :func:`recording` collects it: the file,
+    the dotted key (``[]`` for an array of tables: ``landmarks[].position_mm``), the
+    reader (number, vector, string, boolean, table, tables or raw; has: only asked whether
+    it is there, so optional), and what it allows."""
+
+    source: str
+    key: str
+    kind: str
+    required: bool
+    default: Any = None
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False
+    length: int | None = None
+    choices: tuple[str, ...] = ()
+
+
+_RECORDINGS: list[list[KeyRecord]] = []
+
+
+@contextmanager
+def recording() -> Iterator[list[KeyRecord]]:
+    """Collect a :class:`KeyRecord` for every key any :class:`Table` is asked for meanwhile,
+    present in its file or not (the documentation's file reference is made from them)."""
+    records: list[KeyRecord] = []
+    _RECORDINGS.append(records)
+    try:
+        yield records
+    finally:
+        _RECORDINGS.remove(records)
 
 
 class Table:
@@ -89,11 +146,24 @@ class Table:
 
     def has(self, key: str) -> bool:
         """Whether the table holds ``key``."""
+        self._record(key, "has", None)
         return key in self._data
 
     def keys(self) -> list[str]:
         """The keys present in the table."""
         return list(self._data)
+
+    def _record(self, key: str, kind: str, default: Any, **allowed: Any) -> None:
+        """Tell every active :func:`recording` that ``key`` was asked for."""
+        if not _RECORDINGS:
+            return
+        required = default is _REQUIRED
+        dotted = re.sub(r"\[\d+\]", "[]", self._prefix + key)
+        record = KeyRecord(
+            self._source, dotted, kind, required, None if required else default, **allowed
+        )
+        for records in _RECORDINGS:
+            records.append(record)
 
     def _take(self, key: str, default: Any) -> Any:
         self._taken.add(key)
@@ -120,6 +190,14 @@ class Table:
         exclusive_minimum: bool = False,
     ) -> float:
         """A finite real number within the given bounds."""
+        self._record(
+            key,
+            "number",
+            default,
+            minimum=minimum,
+            maximum=maximum,
+            exclusive_minimum=exclusive_minimum,
+        )
         value = self._take(key, default)
         if value is default and default is not _REQUIRED:
             return value
@@ -158,6 +236,15 @@ class Table:
         exclusive_minimum: bool = False,
     ) -> np.ndarray:
         """A list of finite numbers, of a given length if asked."""
+        self._record(
+            key,
+            "vector",
+            default,
+            minimum=minimum,
+            maximum=maximum,
+            exclusive_minimum=exclusive_minimum,
+            length=length,
+        )
         value = self._take(key, default)
         if value is default and default is not _REQUIRED:
             return value
@@ -170,6 +257,7 @@ class Table:
 
     def string(self, key: str, *, default: Any = _REQUIRED, choices: tuple[str, ...] = ()) -> str:
         """A string, one of ``choices`` if given."""
+        self._record(key, "string", default, choices=choices)
         value = self._take(key, default)
         if value is default and default is not _REQUIRED:
             return value
@@ -180,6 +268,7 @@ class Table:
         return value
 
     def boolean(self, key: str, *, default: Any = _REQUIRED) -> bool:
+        self._record(key, "boolean", default)
         value = self._take(key, default)
         if not isinstance(value, bool):
             raise self.error(key, value, "expected true or false")
@@ -187,6 +276,7 @@ class Table:
 
     def table(self, key: str, *, required: bool = True) -> Table:
         """A sub-table; an empty one when absent and not required."""
+        self._record(key, "table", _REQUIRED if required else {})
         value = self._take(key, _REQUIRED if required else {})
         if not isinstance(value, dict):
             raise self.error(key, value, "expected a table ([" + key + "])")
@@ -194,6 +284,7 @@ class Table:
 
     def tables(self, key: str) -> Iterator[Table]:
         """An array of tables ([[key]])."""
+        self._record(key, "tables", _REQUIRED)
         value = self._take(key, _REQUIRED)
         if not isinstance(value, list) or not value or not all(isinstance(v, dict) for v in value):
             raise self.error(key, value, f"expected one or more [[{key}]] tables")
@@ -202,6 +293,7 @@ class Table:
 
     def raw(self, key: str, *, default: Any = _REQUIRED) -> Any:
         """A value taken as it is (for parts validated elsewhere)."""
+        self._record(key, "raw", default)
         return self._take(key, default)
 
     def finish(self) -> None:

@@ -58,8 +58,14 @@ import scipy.optimize
 import scipy.signal
 
 from spm_opt.errors import InputError
-from spm_opt.execution.log import read_log
-from spm_opt.identify_samples import FILTER_ORDER, correlation_factor
+from spm_opt.identify_samples import (
+    FILTER_ORDER,
+    check_log_rows,
+    correlation_factor,
+    log_values,
+    named,
+)
+from spm_opt.input_limits import read_execution_log
 from spm_opt.model.actuator import LOOP_RATE_RANGE_PER_S
 from spm_opt.model.params import Robot
 from spm_opt.report.markdown import markdown_table
@@ -273,21 +279,22 @@ def _cutoff(step_s: float) -> float:
 
 def _log_runs(paths: list[Path]) -> list[_Run]:
     """Every run of every log, filtered."""
+    check_log_rows(paths)
     runs = [run for path in paths for run in _runs(Path(path))]
     if not runs:
         raise InputError(
-            f"logs {', '.join(map(str, paths))}: no run of {MIN_RUN_PERIODS} periods of "
-            f"the {CUTOFF_HZ:g} Hz filter with goals and positions"
+            f"logs {named(paths)}: no run of {MIN_RUN_PERIODS} periods of the "
+            f"{CUTOFF_HZ:g} Hz filter with goals and positions"
         )
     return runs
 
 
 def _runs(path: Path) -> list[_Run]:
     """The runs of rows that have goals and positions, long enough, on uniform grids."""
-    table, _ = read_log(path)
-    t = table["time_s"].to_numpy(dtype=float)
-    goal = table[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy(dtype=float)
-    position = table[["position_theta1_rad", "position_theta2_rad"]].to_numpy(dtype=float)
+    table, _ = read_execution_log(path)
+    t = log_values(table, ("time_s",), path)[:, 0]
+    goal = log_values(table, ("goal_theta1_rad", "goal_theta2_rad"), path)
+    position = log_values(table, ("position_theta1_rad", "position_theta2_rad"), path)
     complete = np.isfinite(t) & np.all(np.isfinite(goal), axis=1)
     complete &= np.all(np.isfinite(position), axis=1)
     runs = []

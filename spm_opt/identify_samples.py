@@ -25,10 +25,11 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import scipy.signal
 
 from spm_opt.errors import InputError
-from spm_opt.execution.log import read_log
+from spm_opt.input_limits import MAX_LOG_ROWS, excerpt, log_rows, read_execution_log
 
 MEASURED = (
     "position_theta1_rad",
@@ -120,16 +121,18 @@ def log_samples(
     paths: list[Path], cutoff_hz: float, decimation: int | None, min_speed_rad_s: float
 ) -> Samples:
     """The samples of the logs at ``paths`` (see the module docstring); ``decimation``
-    None: :data:`SAMPLES_PER_CUTOFF` samples a period of the cutoff."""
+    None: :data:`SAMPLES_PER_CUTOFF` samples a period of the cutoff. Logs of more than
+    :data:`~spm_opt.input_limits.MAX_LOG_ROWS` rows together are refused before any is
+    parsed (:func:`check_log_rows`)."""
     if decimation is not None and decimation < 1:
         raise InputError(f"--decimation {decimation}: expected a whole number >= 1")
     if not min_speed_rad_s >= 0.0:
         raise InputError(f"--min-speed {min_speed_rad_s}: expected a rate >= 0 rad/s")
+    check_log_rows(paths)
     runs = [run for path in paths for run in _runs(Path(path))]
     if not runs:
         raise InputError(
-            f"logs {', '.join(map(str, paths))}: no run of {MIN_RUN_SAMPLES} complete samples "
-            "or more"
+            f"logs {named(paths)}: no run of {MIN_RUN_SAMPLES} complete samples or more"
         )
     parts, slices, rates, start = [], [], [], 0
     for path, t, values in runs:
@@ -164,15 +167,48 @@ def log_samples(
 
 def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray]]:
     """(path, time (n,), measurements (n, 6)) of each run of complete samples."""
-    table, _ = read_log(path)
-    t = table["time_s"].to_numpy(dtype=float)
-    values = table[list(MEASURED)].to_numpy(dtype=float)
+    table, _ = read_execution_log(path)
+    t = log_values(table, ("time_s",), path)[:, 0]
+    values = log_values(table, MEASURED, path)
     complete = np.all(np.isfinite(values), axis=1) & np.isfinite(t)
     runs = []
     for chunk in np.split(np.arange(len(t)), np.flatnonzero(np.diff(complete.astype(int))) + 1):
         if complete[chunk[0]] and len(chunk) >= MIN_RUN_SAMPLES:
             runs.append((path, t[chunk], values[chunk]))
     return runs
+
+
+def check_log_rows(paths: list[Path]) -> None:
+    """Refuse logs of more than :data:`~spm_opt.input_limits.MAX_LOG_ROWS` rows together,
+    before any is parsed: identification holds every row in memory."""
+    total = sum(log_rows(Path(path)) for path in paths)
+    if total > MAX_LOG_ROWS:
+        raise InputError(
+            f"logs {named(paths)}: {total:,} rows{' together' if len(paths) > 1 else ''}; "
+            f"identification holds every row in memory (about 2.5 kB each) and takes at most "
+            f"{MAX_LOG_ROWS:,}: fit fewer or shorter logs (minutes identify a robot)"
+        )
+
+
+def named(paths: list[Path]) -> str:
+    """The logs at ``paths`` for a message: the first few."""
+    shown = ", ".join(str(path) for path in paths[:3])
+    return shown if len(paths) <= 3 else f"{shown} and {len(paths) - 3:,} more"
+
+
+def log_values(table: pd.DataFrame, columns: tuple[str, ...], path: Path) -> np.ndarray:
+    """A log's ``columns`` as floats (rows, columns): an empty cell is NaN (a failed read),
+    a cell that holds no number an :class:`InputError` naming its line."""
+    cells = table[list(columns)]
+    values = cells.apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    wrong = np.isnan(values) & cells.notna().to_numpy()
+    if np.any(wrong):
+        row, column = np.argwhere(wrong)[0]
+        raise InputError(
+            f"log {path}: line {row + 2}: {columns[column]} = "
+            f"{excerpt(str(cells.iloc[row, column]))}: expected a number"
+        )
+    return values
 
 
 def _uniform(path: Path, t: np.ndarray, values: np.ndarray) -> tuple[float, np.ndarray]:

@@ -21,9 +21,10 @@ import numpy as np
 
 from spm_opt import bounds
 from spm_opt.contour import Contour
-from spm_opt.errors import InputError
+from spm_opt.errors import InputError, UnreachableError
 from spm_opt.fields import Table, apply_overrides, read_toml
 from spm_opt.files import json_default
+from spm_opt.input_limits import MAX_LANDMARKS, excerpt
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import RPM
 from spm_opt.model.params import MM, Robot, load_robot
@@ -130,8 +131,14 @@ class Problem:
             raise InputError(
                 f"landmarks: expected at least 2 points of 3 coordinates, got {landmarks.shape}"
             )
+        if len(landmarks) > MAX_LANDMARKS:
+            raise InputError(
+                f"landmarks: {len(landmarks):,} of them; expected at most {MAX_LANDMARKS}"
+            )
         if len(names) != len(landmarks) or len(set(names)) != len(names):
-            raise InputError(f"landmark names {list(names)}: expected one unique name per landmark")
+            raise InputError(
+                f"landmark names {excerpt(list(names))}: expected one unique name per landmark"
+            )
         for name, point in zip(names, landmarks, strict=True):
             if not np.all(np.isfinite(point)):
                 raise InputError(f"landmark {name}: position {point / MM} mm must be finite")
@@ -159,7 +166,7 @@ class Problem:
         durations = self.segment_durations
         if durations.shape != (len(visits) - 1,):
             raise InputError(
-                f"segment_durations_s = {durations.tolist()}: expected {len(visits) - 1} "
+                f"segment_durations_s = {excerpt(durations.tolist())}: expected {len(visits) - 1} "
                 f"durations, one per segment of the {'closed' if self.closed else 'open'} cut "
                 f"through {len(names)} landmarks"
             )
@@ -167,9 +174,16 @@ class Problem:
             (durations >= MIN_SEGMENT_DURATION_S) & (durations <= MAX_SEGMENT_DURATION_S)
         ):
             raise InputError(
-                f"segment_durations_s = {durations.tolist()}: expected durations between "
+                f"segment_durations_s = {excerpt(durations.tolist())}: expected durations between "
                 f"{MIN_SEGMENT_DURATION_S:g} s and {MAX_SEGMENT_DURATION_S:g} s"
             )
+        for name, point in zip(names, landmarks, strict=True):
+            if point[2] <= 0.0:
+                raise UnreachableError(
+                    f"landmark {name}: position_mm = {_millimetres(point)}: z = "
+                    f"{point[2] / MM:g} mm lies at or below the isocenter plane; the robot "
+                    "reaches only z > 0"
+                )
         self.robot.check_reachable(self.platform_points, list(names))
 
     @property
@@ -215,6 +229,7 @@ class Problem:
 
     @property
     def visit_names(self) -> list[str]:
+        """The landmarks' names in visiting order (a closed cut ends at the first)."""
         return [self.landmark_names[i] for i in self.visit_order]
 
     @cached_property
@@ -301,7 +316,8 @@ def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -
             raise planners.error(key, value, f"expected a table [planner.{key}]")
     limits_table.finish()
     root.finish()
-    return Problem(
+    return _in_file(
+        path,
         name=name,
         description=description,
         robot=robot,
@@ -316,6 +332,19 @@ def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -
     )
 
 
+def _in_file(path: Path, **fields: Any) -> Problem:
+    """The problem of these fields, read from ``path``: an error names the file."""
+    try:
+        return Problem(**fields)
+    except InputError as error:
+        raise type(error)(f"{path}: {error}") from None
+
+
+def _millimetres(point: np.ndarray) -> str:
+    """A point, m, as the file gives it: ``[x, y, z]`` in mm."""
+    return "[" + ", ".join(f"{value / MM:g}" for value in point) + "]"
+
+
 def _limits(table: Table, robot: Robot) -> Limits:
     positive = {"minimum": 0.0, "exclusive_minimum": True, "default": None}
     speed_rpm = table.number("max_joint_speed_rpm", **positive)
@@ -327,7 +356,7 @@ def _limits(table: Table, robot: Robot) -> Limits:
             f"expected at most the actuator's continuous speed, {actuator_speed / RPM:g} rpm",
         )
     tool_speed = table.number("max_tool_speed_mm_s", **positive)
-    tolerance = table.number("contour_tolerance_mm", minimum=0.0, default=None)
+    tolerance = table.number("contour_tolerance_mm", **positive)
     torque = table.number("max_joint_torque_nm", **positive)
     actuator_torque = robot.actuator.continuous_torque_nm
     if torque is not None and torque > actuator_torque * (1 + 1e-9):

@@ -19,6 +19,8 @@ import csv
 import hashlib
 import io
 import json
+import math
+from collections.abc import Iterator
 from importlib import metadata as package_metadata
 from pathlib import Path
 from typing import Any
@@ -29,12 +31,22 @@ from scipy.interpolate import BPoly, PPoly
 from spm_opt.contour import Contour
 from spm_opt.errors import InputError
 from spm_opt.files import json_default, write_atomically
+from spm_opt.input_limits import (
+    EXCERPT_CHARS,
+    MAX_SIDECAR_BYTES,
+    MAX_TRAJECTORY_BYTES,
+    MAX_TRAJECTORY_ROWS,
+    decode_text,
+    excerpt,
+    read_bytes,
+)
 from spm_opt.model import kinematics
 
 COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "qdd1", "qdd2")
 MAX_GRID_SAMPLES = 50_000_000
 MAX_DURATION_S = 86_400.0
 """Longest trajectory a CSV file may hold, s (a day)."""
+_KIND = "a trajectory CSV"  # what a trajectory file is, for messages
 DEFAULT_RATE_HZ = 100.0
 _SAME_TIME_S = 1e-9
 _SIDE_STEP_S = 1e-9
@@ -102,10 +114,12 @@ class Trajectory:
 
     @property
     def start_time(self) -> float:
+        """The first time, s."""
         return float(self._q.x[0])
 
     @property
     def end_time(self) -> float:
+        """The last time, s."""
         return float(self._q.x[-1])
 
     @property
@@ -249,12 +263,19 @@ class Trajectory:
         write_atomically(self.csv_files(Path(path), rate_hz))
 
     def csv_files(self, path: Path, rate_hz: float | None = None) -> dict[Path, str]:
-        """The text of FILE.csv and its FILE.json sidecar, by path, without writing them.
+        """The text of FILE.json, the sidecar, and FILE.csv, in that order, by path,
+        without writing them.
 
         The samples are the ones it was built from, or a grid at ``rate_hz`` (default
         100 Hz) that includes every breakpoint, so reading the file back gives the same
-        polynomial pieces for a trajectory of cubic or quintic pieces.
+        polynomial pieces for a trajectory of cubic or quintic pieces; at most
+        :data:`~spm_opt.input_limits.MAX_TRAJECTORY_ROWS` of them. The sidecar records the
+        SHA-256 of the CSV's bytes and comes first: :func:`~spm_opt.files.write_atomically`
+        renames in order, so a write killed between its renames leaves the new sidecar
+        beside the old CSV (or none), which :meth:`from_csv` refuses, never a new CSV beside
+        an old sidecar (which might record no hash) or none.
         """
+        self._check_csv_rows(rate_hz)
         t, q, qd, qdd = self.samples(rate_hz)
         table = np.column_stack([t, q[:, 0], q[:, 1], qd[:, 0], qd[:, 1], qdd[:, 0], qdd[:, 1]])
         lines = [",".join(COLUMNS)] + [",".join(repr(v) for v in row) for row in table.tolist()]
@@ -267,29 +288,42 @@ class Trajectory:
             "samples": _samples_record(text.encode("utf-8"), t),
         }
         return {
-            path: text,
             sidecar_path(path): json.dumps(sidecar, indent=2, default=json_default) + "\n",
+            path: text,
         }
+
+    def _check_csv_rows(self, rate_hz: float | None) -> None:
+        """Refuse to write a CSV of more samples than :meth:`from_csv` reads, before
+        sampling (breakpoints on the grid count twice: an upper bound)."""
+        if rate_hz is None and self._samples is not None:
+            rows, sampled = len(self._samples[0]), "as built"
+        else:
+            rate = rate_hz or DEFAULT_RATE_HZ
+            rows = math.floor(self.duration * rate) + 1 + len(self.breakpoints)
+            sampled = f"at {rate:g} Hz"
+        if rows > MAX_TRAJECTORY_ROWS:
+            raise InputError(
+                f"trajectory of {self.duration:g} s sampled {sampled}: {rows:,} samples; a "
+                f"trajectory CSV holds at most {MAX_TRAJECTORY_ROWS:,}: lower the rate"
+            )
 
     @classmethod
     def from_csv(cls, path: str | Path) -> Trajectory:
         """Read a trajectory CSV (and its JSON sidecar, when there is one).
 
         Raises :class:`InputError` when the sidecar records samples (every file
-        :meth:`to_csv` writes does) whose bytes are not the CSV's.
+        :meth:`to_csv` writes does) whose bytes are not the CSV's: the pair is
+        inconsistent (a write killed between its renames, or the CSV cut short, edited or
+        replaced).
+        A sidecar without that record (written by hand, or by an older spm_opt) is read as
+        it is. The CSV may hold at most :data:`~spm_opt.input_limits.MAX_TRAJECTORY_ROWS`
+        samples in :data:`~spm_opt.input_limits.MAX_TRAJECTORY_BYTES`.
         """
         path = Path(path)
-        data = _read_bytes(path)
-        metadata: dict[str, Any] = {}
-        sidecar = sidecar_path(path)
-        if sidecar.is_file():
-            try:
-                metadata = json.loads(sidecar.read_text(encoding="utf-8"))
-            except (json.JSONDecodeError, UnicodeDecodeError) as error:
-                raise InputError(f"{sidecar}: not valid JSON: {error}") from None
-            if not isinstance(metadata, dict):
-                raise InputError(f"{sidecar}: expected a JSON object")
-            _check_landmark_times(sidecar, metadata.get("landmark_times_s"))
+        data = read_bytes(path, _KIND, MAX_TRAJECTORY_BYTES)
+        metadata = _read_sidecar(sidecar_path(path))
+        if metadata:
+            _check_landmark_times(sidecar_path(path), metadata.get("landmark_times_s"))
             _check_samples_record(path, metadata.get("samples"), data)
         t, q, qd, qdd = _read_samples(path, data)
         return cls.from_samples(t, q, qd, qdd, metadata)
@@ -370,8 +404,9 @@ def _check_landmark_times(sidecar: Path, times: Any) -> None:
         isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in times
     )
     if not valid:
-        shown = json.dumps(times)[:60]
-        raise InputError(f"{sidecar}: landmark_times_s = {shown}: expected a list of times in s")
+        raise InputError(
+            f"{sidecar}: landmark_times_s = {excerpt(times)}: expected a list of times in s"
+        )
 
 
 def _samples_record(data: bytes, t: np.ndarray) -> dict[str, Any]:
@@ -391,52 +426,55 @@ def _check_samples_record(path: Path, recorded: Any, data: bytes) -> None:
         return
     sidecar = sidecar_path(path).name
     expected = ("count", "duration_s", "sha256")
-    if not isinstance(recorded, dict) or sorted(recorded) != sorted(expected):
+    if (
+        not isinstance(recorded, dict)
+        or sorted(recorded) != sorted(expected)
+        or not isinstance(recorded["sha256"], str)
+        or not all(isinstance(recorded[k], int | float) for k in ("count", "duration_s"))
+    ):
         raise InputError(
-            f"{path.parent / sidecar}: samples = {json.dumps(recorded)[:60]}: expected "
+            f"{path.parent / sidecar}: samples = {excerpt(recorded)}: expected "
             f"{{{', '.join(expected)}}} as spm-opt writes them"
         )
     if hashlib.sha256(data).hexdigest() != recorded["sha256"]:
         raise InputError(
-            f"{path}: not the CSV its sidecar {sidecar} records ({recorded['count']} samples "
-            f"over {recorded['duration_s']:g} s, SHA-256 {str(recorded['sha256'])[:12]}…): it "
-            "was cut short, edited or replaced; plan it again"
+            f"{path}: not the CSV its sidecar {sidecar} records ({recorded['count']:,} samples "
+            f"over {recorded['duration_s']:g} s, SHA-256 {recorded['sha256'][:12]}…): the pair "
+            "is inconsistent (a write killed between its files, or the CSV cut short, edited "
+            "or replaced); plan it again"
         )
 
 
-def _read_bytes(path: Path) -> bytes:
+def _read_sidecar(sidecar: Path) -> dict[str, Any]:
+    """The metadata a trajectory's JSON sidecar holds; none when there is no sidecar (a
+    directory or a pipe of its name is an error)."""
+    if not sidecar.exists():
+        return {}
+    kind = "a trajectory's JSON sidecar"
+    text = decode_text(read_bytes(sidecar, kind, MAX_SIDECAR_BYTES), sidecar, kind)
     try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except OSError as error:
-        raise InputError(f"{path}: cannot be read ({error})") from None
+        metadata = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise InputError(f"{sidecar}: not valid JSON: {error}") from None
+    except (ValueError, RecursionError) as error:  # a huge integer, deep nesting
+        raise InputError(f"{sidecar}: not valid JSON: {str(error).split(':')[0]}") from None
+    if not isinstance(metadata, dict):
+        raise InputError(f"{sidecar}: expected a JSON object")
+    return metadata
 
 
 def _read_samples(path: Path, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The samples (t, q, qd, qdd) of a trajectory CSV's bytes, checked."""
+    if data.count(b"\n") - 1 > MAX_TRAJECTORY_ROWS:
+        raise _too_many_samples(path)
+    rows = csv.reader(io.StringIO(decode_text(data, path, _KIND), newline=""))
+    lines = data.count(b"\n") + data.count(b"\r") + 1  # at least the rows
     try:
-        rows = list(csv.reader(io.StringIO(data.decode("utf-8"), newline="")))
-    except UnicodeDecodeError as error:
-        raise InputError(f"{path}: cannot be read ({error})") from None
-    if not rows or tuple(c.strip() for c in rows[0]) != COLUMNS:
-        found = f"header is {','.join(rows[0])!r}" if rows else "empty file"
-        raise InputError(f"{path}: {found}; expected the header {','.join(COLUMNS)}")
-    values = np.empty((len(rows) - 1, len(COLUMNS)))
-    for number, row in enumerate(rows[1:], start=2):
-        if len(row) != len(COLUMNS):
-            raise InputError(
-                f"{path}: line {number} has {len(row)} values; expected {len(COLUMNS)}"
-            )
-        for column, text in enumerate(row):
-            try:
-                value = float(text)
-            except ValueError:
-                value = float("nan")
-            if not np.isfinite(value):
-                where = f"{path}: line {number}, column {COLUMNS[column]} = {text!r}"
-                raise InputError(f"{where}: expected a finite number")
-            values[number - 2, column] = value
+        values = _parse_rows(path, rows, min(lines, MAX_TRAJECTORY_ROWS + 1))
+    except csv.Error as error:
+        raise InputError(
+            f"{path}: line {rows.line_num}: not CSV ({error}); expected {_KIND}"
+        ) from None
     if len(values) < 2:
         raise InputError(f"{path}: {len(values)} samples; expected at least 2")
     span = values[-1, 0] - values[0, 0]
@@ -449,3 +487,47 @@ def _read_samples(path: Path, data: bytes) -> tuple[np.ndarray, np.ndarray, np.n
         line = int(np.argmax(steps <= 0.0)) + 3
         raise InputError(f"{path}: line {line}, column t: times must increase strictly")
     return values[:, 0], values[:, 1:3], values[:, 3:5], values[:, 5:7]
+
+
+def _parse_rows(path: Path, rows: Iterator[list[str]], lines: int) -> np.ndarray:
+    """The values (samples, 7) of the CSV's ``rows``, at most ``lines`` with the header
+    (the header first, then finite numbers, 7 a row)."""
+    header = next(rows, None)
+    if header is None or tuple(c.strip() for c in header) != COLUMNS:
+        found = "empty file"
+        if header is not None:
+            found = f"header is {excerpt(','.join(c[:EXCERPT_CHARS] for c in header[:8]))}"
+        raise InputError(f"{path}: {found}; expected the header {','.join(COLUMNS)}")
+    values = np.empty((lines - 1, len(COLUMNS)))
+    count = 0
+    for number, row in enumerate(rows, start=2):
+        if count == len(values):
+            raise _too_many_samples(path)
+        if len(row) != len(COLUMNS):
+            raise InputError(
+                f"{path}: line {number} has {len(row)} values; expected {len(COLUMNS)}"
+            )
+        numbers = [_finite(text) for text in row]
+        if None in numbers:
+            column = numbers.index(None)
+            where = f"{path}: line {number}, column {COLUMNS[column]} = {excerpt(row[column])}"
+            raise InputError(f"{where}: expected a finite number")
+        values[count] = numbers
+        count += 1
+    return values[:count]
+
+
+def _too_many_samples(path: Path) -> InputError:
+    return InputError(
+        f"{path}: more than {MAX_TRAJECTORY_ROWS:,} samples; expected {_KIND} of at most "
+        f"{MAX_TRAJECTORY_ROWS:,} samples"
+    )
+
+
+def _finite(text: str) -> float | None:
+    """The finite number ``text`` holds, else None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None

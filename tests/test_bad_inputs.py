@@ -38,6 +38,7 @@ A1 = "position_mm = [0.0, 0.0, 68.08]"
 A2 = "position_mm = [-22.14, -11.39, 63.10]"
 A3 = "position_mm = [-32.44, 22.58, 60.42]"
 SPEED = "max_joint_speed_rpm = 13.7"
+TOLERANCE = "contour_tolerance_mm = 0.1"
 LIMITS = PROBLEM_TEXT[PROBLEM_TEXT.index("[limits]") :]  # the table, to the end of the file
 THETA1 = "theta1_range_deg = [-60.0, 60.0]"
 
@@ -141,8 +142,9 @@ def test_shipped_inputs_succeed(tmp_path: Path, capsys: pytest.CaptureFixture[st
     trajectory.write_text(HEADER + GOOD_ROWS, encoding="utf-8")
     status, _ = run_cli(["evaluate", str(problem), str(trajectory)])
     captured = capsys.readouterr()
-    assert status == 0, captured.err
-    assert captured.err == ""
+    # read and judged: the hand-made motion breaks limits (exit 1), it is not bad input (2)
+    assert status == 1, captured.err
+    assert captured.err.startswith("spm-opt: the planned cut: ")
 
 
 # --- bad problem and robot files, through `spm-opt plan` -----------------------------------
@@ -201,7 +203,8 @@ PLAN_CASES = {
         ("A3",), problem=((A3, "position_mm = [-32.44, 22.58, 0.0]"),)
     ),
     "landmark-below-isocenter-plane": Case(
-        ("A3",), problem=((A3, "position_mm = [-32.44, 22.58, -60.42]"),)
+        ("problem.toml: landmark A3", "position_mm = [-32.44, 22.58, -60.42]", "z = -60.42 mm"),
+        problem=((A3, "position_mm = [-32.44, 22.58, -60.42]"),),
     ),
     "landmark-outside-joint-range": Case(
         ("A3",), problem=((A3, "position_mm = [60.0, 0.0, 10.0]"),)
@@ -254,6 +257,14 @@ PLAN_CASES = {
     # limits
     "speed-above-actuator": Case(
         ("max_joint_speed_rpm", "13.7"), problem=((SPEED, "max_joint_speed_rpm = 20.0"),)
+    ),
+    "zero-tolerance": Case(
+        ("problem.toml: limits.contour_tolerance_mm = 0.0", "> 0"),
+        problem=((TOLERANCE, "contour_tolerance_mm = 0.0"),),
+    ),
+    "negative-tolerance": Case(
+        ("limits.contour_tolerance_mm = -0.1",),
+        problem=((TOLERANCE, "contour_tolerance_mm = -0.1"),),
     ),
     "zero-speed-limit": Case(
         ("max_joint_speed_rpm",), problem=((SPEED, "max_joint_speed_rpm = 0.0"),)

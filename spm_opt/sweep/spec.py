@@ -25,9 +25,10 @@
 
 Keys are those of the problem file, in its units, with ``robot.`` before the robot file's
 (see :func:`spm_opt.problem.load_problem`). The tasks are every grid combination × every
-random sample × every flap × every planner. Every axis is checked when the file is read:
-an unknown key, an empty axis, a value the problem would refuse or a bad range is a
-one-line error naming it.
+random sample × every flap × every planner; more than ``max_tasks`` of them
+(:data:`DEFAULT_MAX_TASKS` unless the caller allows more) are refused, counted before any
+is made. Every axis is checked when the file is read: an unknown key, an empty axis, a
+value the problem would refuse or a bad range is a one-line error naming it.
 
 ``[flaps]`` (:func:`spm_opt.sweep.flaps.random_flaps`): ``landmarks`` is a count of 3 to
 12, or an inclusive range of them each flap draws its count from; ``contour_tolerance_mm``
@@ -44,6 +45,7 @@ flaps whichever of these keys are given.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -52,6 +54,7 @@ import numpy as np
 
 from spm_opt.errors import InputError
 from spm_opt.fields import Table, read_toml
+from spm_opt.input_limits import excerpt
 from spm_opt.planners import PLANNERS
 from spm_opt.planners.registry import takes_warm_start
 from spm_opt.problem import Problem, load_problem
@@ -79,6 +82,9 @@ FLAP_LIMITS = {
     "max_tool_speed_mm_s": "limits.max_tool_speed_mm_s",
 }
 """The ``[flaps]`` keys that draw a limit per flap, and the problem's key each sets."""
+DEFAULT_MAX_TASKS = 100_000
+"""Most tasks a sweep may have unless its caller allows more (``max_tasks``): the shipped
+sweeps have 24 to 1,200; at seconds to minutes a task, 100,000 take days on a cluster."""
 LANDMARKS = (3, 12)
 """The fewest and the most landmarks a ``[flaps]`` table may ask for."""
 
@@ -125,7 +131,8 @@ class FlapAxis:
 
 @dataclass(frozen=True)
 class SweepSpec:
-    """A validated sweep specification; :meth:`tasks` expands it."""
+    """A validated sweep specification; :meth:`tasks` expands it into at most
+    ``max_tasks`` tasks (:data:`DEFAULT_MAX_TASKS` unless its caller allows more)."""
 
     name: str
     description: str
@@ -135,6 +142,42 @@ class SweepSpec:
     random: RandomAxes | None
     flaps: FlapAxis | None
     source: Path
+    max_tasks: int = DEFAULT_MAX_TASKS
+
+    @property
+    def task_count(self) -> int:
+        """How many tasks :meth:`tasks` makes: grid points × random samples × flaps ×
+        planners."""
+        return self._grid_points * self._samples * self._flap_count * len(self.planners)
+
+    @property
+    def _grid_points(self) -> int:
+        return math.prod(len(values) for values in self.grid.values())
+
+    @property
+    def _samples(self) -> int:
+        return self.random.samples if self.random else 1
+
+    @property
+    def _flap_count(self) -> int:
+        return self.flaps.count if self.flaps else 1
+
+    def check_size(self) -> None:
+        """Refuse a sweep of more than ``max_tasks`` tasks, before any is made."""
+        count = self.task_count
+        if count <= self.max_tasks:
+            return
+        sizes = {
+            "grid points": self._grid_points,
+            "random samples": self._samples,
+            "flaps": self._flap_count,
+            "planners": len(self.planners),
+        }
+        factors = " x ".join(f"{size:,} {what}" for what, size in sizes.items() if size > 1)
+        raise InputError(
+            f"{self.source}: {count:,} tasks ({factors}); expected at most {self.max_tasks:,} "
+            "(spm-opt sweep --max-tasks raises the limit)"
+        )
 
     def parameter_sets(
         self, problem: Problem
@@ -157,7 +200,9 @@ class SweepSpec:
     def tasks(self) -> list[Task]:
         """Every task of the sweep: each parameter set with each planner; a planner that
         takes a warm start starts from the plan of the task's anchor (see :class:`Task`).
-        Each task carries the problem's files (their contents) and this process's code."""
+        Each task carries the problem's files (their contents) and this process's code.
+        A sweep of more than ``max_tasks`` tasks is refused before any is made."""
+        self.check_size()
         files = ProblemFiles.read(self.problem_path)
         code = code_identity()
         tasks = []
@@ -179,9 +224,12 @@ class SweepSpec:
         return tasks
 
 
-def load_sweep_spec(path: str | Path) -> SweepSpec:
-    """Read and validate a sweep specification (see the module's docstring)."""
+def load_sweep_spec(path: str | Path, max_tasks: int = DEFAULT_MAX_TASKS) -> SweepSpec:
+    """Read and validate a sweep specification (see the module's docstring); one of more
+    than ``max_tasks`` tasks is refused, before its grid's values are each checked."""
     path = Path(path)
+    if isinstance(max_tasks, bool) or not isinstance(max_tasks, int) or max_tasks < 1:
+        raise InputError(f"max_tasks = {excerpt(max_tasks)}: expected a whole number >= 1")
     root = Table(read_toml(path), str(path))
     name = root.string("name")
     description = root.string("description", default="")
@@ -200,12 +248,20 @@ def load_sweep_spec(path: str | Path) -> SweepSpec:
         raise root.error(
             "planners", planners, f"expected a non-empty list of {', '.join(sorted(PLANNERS))}"
         )
-    grid = _grid(root.table("grid", required=False), problem_path)
+    grid_table = root.table("grid", required=False)
+    grid = _grid(grid_table)
     random = _random(root.table("random", required=False), problem_path, grid)
     axes = {*grid, *(random.ranges if random else {})}
     flaps = _flaps(root.table("flaps", required=False), axes)
     root.finish()
-    return SweepSpec(name, description, problem_path, tuple(planners), grid, random, flaps, path)
+    spec = SweepSpec(
+        name, description, problem_path, tuple(planners), grid, random, flaps, path, max_tasks
+    )
+    spec.check_size()
+    for key, values in grid.items():
+        for value in values:
+            _check_value(grid_table, key, value, problem_path)
+    return spec
 
 
 def _check_value(table: Table, key: str, value: Any, problem_path: Path) -> None:
@@ -216,10 +272,12 @@ def _check_value(table: Table, key: str, value: Any, problem_path: Path) -> None
     try:
         load_problem(problem_path, {key: value})
     except InputError as error:
-        raise InputError(f"{table.name(key)} = {value!r}: {error}") from None
+        raise InputError(f"{table.name(key)} = {excerpt(value)}: {error}") from None
 
 
-def _grid(table: Table, problem_path: Path) -> dict[str, list[Any]]:
+def _grid(table: Table) -> dict[str, list[Any]]:
+    """The ``[grid]`` table's axes, each a non-empty list of distinct values (the values
+    themselves are checked once the sweep's size is: :func:`_check_value`)."""
     grid = {}
     for key in table.keys():
         values = table.raw(key)
@@ -227,8 +285,6 @@ def _grid(table: Table, problem_path: Path) -> dict[str, list[Any]]:
             raise table.error(key, values, "expected a non-empty list of values (an axis)")
         if len({repr(v) for v in values}) < len(values):
             raise table.error(key, values, "expected each value once")
-        for value in values:
-            _check_value(table, key, value, problem_path)
         grid[key] = values
     table.finish()
     return grid

@@ -20,7 +20,6 @@ import hashlib
 import json
 import os
 import tempfile
-import tomllib
 from collections.abc import Iterator
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -31,6 +30,8 @@ from typing import Any
 
 from spm_opt.comparison import Outcome, run_planner
 from spm_opt.errors import InputError
+from spm_opt.fields import parse_toml
+from spm_opt.input_limits import MAX_TOML_BYTES, decode_text, excerpt, read_bytes
 from spm_opt.planners import plan
 from spm_opt.problem import load_problem
 from spm_opt.trajectory import Trajectory, package_version
@@ -78,7 +79,7 @@ class ProblemFiles:
     def __post_init__(self) -> None:
         if Path(self.robot).is_absolute():
             raise InputError(
-                f"{self.path}: robot = {self.robot!r}: a sweep needs the robot file's path "
+                f"{self.path}: robot = {excerpt(self.robot)}: a sweep needs the robot file's path "
                 "relative to the problem file (its workers get both files' contents)"
             )
 
@@ -87,7 +88,9 @@ class ProblemFiles:
         """Read a (valid) problem file and the robot file it names."""
         path = Path(path).absolute()
         text = _read_text(path)
-        robot = tomllib.loads(text)["robot"]
+        robot = parse_toml(text, str(path)).get("robot")
+        if not isinstance(robot, str):
+            raise InputError(f"{path}: robot = {excerpt(robot)}: expected the robot file's path")
         return cls(str(path), text, robot, _read_text(path.parent / robot))
 
     @property
@@ -120,10 +123,8 @@ class ProblemFiles:
 
 
 def _read_text(path: Path) -> str:
-    try:
-        return path.read_bytes().decode("utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(f"{path}: cannot be read ({error})") from None
+    """The text of a TOML file of at most :data:`~spm_opt.input_limits.MAX_TOML_BYTES`."""
+    return decode_text(read_bytes(path, "a TOML file", MAX_TOML_BYTES), path, "a TOML file")
 
 
 def source_sha256(root: Path) -> str:
