@@ -3,7 +3,7 @@
 A user's mistake prints one line, ``spm-opt: error: ...``, and exits with status 2; so
 does a missing optional package, naming the extra that installs it. The library's
 warnings reach stderr as ``spm-opt: warning: ...``; ``-v`` adds its info lines, ``-vv``
-its debug lines.
+its debug lines. :data:`EXIT_STATUSES` lists what each exit status means.
 """
 
 from __future__ import annotations
@@ -11,22 +11,52 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import signal
 import sys
+import textwrap
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
-from spm_opt.errors import InputError, RunInterrupted, SpmOptError, require
+from spm_opt.errors import InputError, PlanningError, RunInterrupted, SpmOptError, require
 from spm_opt.execution.tracking import TRACKING_MODES
+from spm_opt.output_paths import check_output_directory, check_output_file
+from spm_opt.planners import PLANNERS
+from spm_opt.sweep.spec import DEFAULT_MAX_TASKS
+from spm_opt.trajectory import package_version
 
 if TYPE_CHECKING:
+    from spm_opt.evaluate import Report
     from spm_opt.execution import ExecutionResult
 
 PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
-_LOG = logging.getLogger(__name__)
+_LOG = logging.getLogger("spm_opt.cli")  # also when run as __main__
 _VERBOSE = "show the library's info lines on stderr (-vv: debug lines too)"
+
+EXIT_STATUSES = {
+    0: "success",
+    1: "the plan or run breaks a limit (evaluate), a planner failed (plan, compare), or the "
+    "run ended in a safe stop (execute)",
+    2: "bad input: one line 'spm-opt: error: ...' names the field and what is allowed "
+    "(a missing optional package too); nothing is written",
+    130: "interrupted by Ctrl-C (SIGINT): nothing is written",
+}
+"""Every exit status of ``spm-opt`` and what it means."""
+
+_DESCRIPTION = """\
+Plan, judge and execute trajectories for the spherical parallel manipulator for
+brain surgery. 'spm-opt COMMAND --help' describes each command."""
+
+
+def _epilog() -> str:
+    lines = [
+        textwrap.fill(meaning, 78, initial_indent=f"  {status:<5}", subsequent_indent=" " * 7)
+        for status, meaning in EXIT_STATUSES.items()
+    ]
+    return "exit statuses:\n" + "\n".join(lines)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -37,12 +67,23 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="spm-opt", description=__doc__.splitlines()[0])
+    parser = _Parser(
+        prog="spm-opt",
+        description=_DESCRIPTION,
+        epilog=_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"spm-opt {package_version()}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help=_VERBOSE)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     reproduce = commands.add_parser("reproduce", help="reproduce the paper's Table III and Fig. 8")
-    reproduce.add_argument("--out", required=True, type=Path, help="output directory")
+    reproduce.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="directory for the tables and figures (made if missing)",
+    )
     reproduce.add_argument(
         "--problem",
         default=PAPER_PROBLEM,
@@ -52,14 +93,24 @@ def _parser() -> argparse.ArgumentParser:
 
     plan = commands.add_parser("plan", help="plan a problem and write the trajectory CSV")
     plan.add_argument("problem", type=Path, help="problem TOML file")
-    plan.add_argument("--planner", default="cubic", help="planner name (default: cubic)")
-    plan.add_argument("--out", required=True, type=Path, help="trajectory CSV to write")
+    plan.add_argument(
+        "--planner",
+        default="cubic",
+        metavar="NAME",
+        help=f"one of {', '.join(sorted(PLANNERS))} (default: cubic)",
+    )
+    plan.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="trajectory CSV to write; its sidecar (.json) goes beside it",
+    )
     plan.add_argument(
         "--rate",
         type=float,
         default=None,
         metavar="HZ",
-        help="sampling rate of the CSV (default 100 Hz, breakpoints included)",
+        help="sampling rate of the CSV, Hz (default 100, breakpoints included)",
     )
 
     compare = commands.add_parser(
@@ -72,7 +123,12 @@ def _parser() -> argparse.ArgumentParser:
         metavar="NAMES",
         help="comma-separated planner names (default: every registered planner)",
     )
-    compare.add_argument("--out", required=True, type=Path, help="output directory")
+    compare.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="directory for the table and figures (made if missing)",
+    )
 
     _execute_parser(commands)
     _emulate_parser(commands)
@@ -81,13 +137,26 @@ def _parser() -> argparse.ArgumentParser:
         "sweep", help="run a parameter sweep (resumable) on a process pool or a Dask cluster"
     )
     sweep.add_argument("spec", type=Path, help="sweep specification TOML (problems/sweeps/)")
-    sweep.add_argument("--out", required=True, type=Path, help="output directory")
+    sweep.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="directory for the results (made if missing; a second run resumes there)",
+    )
     sweep.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     sweep.add_argument(
         "--scheduler",
         default=None,
         metavar="ADDRESS",
-        help="Dask scheduler tcp://host:port, or 'local' for a Dask cluster on this machine",
+        help="Dask scheduler tcp://host:port, or 'local' for a Dask cluster on this machine "
+        "(default: a process pool of --workers)",
+    )
+    sweep.add_argument(
+        "--max-tasks",
+        type=int,
+        default=DEFAULT_MAX_TASKS,
+        metavar="N",
+        help=f"refuse a sweep of more tasks than this (default {DEFAULT_MAX_TASKS:,})",
     )
     sweep.add_argument(
         "--retry-failed",
@@ -108,18 +177,32 @@ def _parser() -> argparse.ArgumentParser:
     identify.add_argument(
         "--out", required=True, type=Path, help="robot TOML to write (.md and .png beside it)"
     )
-    identify.add_argument("--validate", type=Path, help="a log not used for the fit")
     identify.add_argument(
-        "--cutoff-hz", type=float, default=2.0, help="the parallel low-pass filter (default 2)"
+        "--validate",
+        type=Path,
+        metavar="LOG",
+        help="judge the fit on this log, not used for it (default: on the fitted logs)",
+    )
+    identify.add_argument(
+        "--cutoff-hz",
+        type=float,
+        default=2.0,
+        metavar="HZ",
+        help="cutoff of the zero-phase low-pass filter, Hz (default 2)",
     )
     identify.add_argument(
         "--decimation",
         type=int,
         default=None,
-        help="keep one sample in N (default: 5 a cutoff period)",
+        metavar="N",
+        help="keep one sample in N (default: 5 samples a cutoff period)",
     )
     identify.add_argument(
-        "--min-speed", type=float, default=0.02, metavar="RAD_S", help="slower samples left out"
+        "--min-speed",
+        type=float,
+        default=0.02,
+        metavar="RAD_S",
+        help="samples slower than this are left out, rad/s (default 0.02)",
     )
 
     evaluate = commands.add_parser(
@@ -129,18 +212,21 @@ def _parser() -> argparse.ArgumentParser:
     evaluate.add_argument(
         "trajectory", type=Path, help="trajectory CSV file, or execution log CSV (spm-opt execute)"
     )
-    evaluate.add_argument("--json", action="store_true", help="print the report as JSON")
+    evaluate.add_argument(
+        "--json", action="store_true", help="print the report as JSON (default: markdown)"
+    )
     evaluate.add_argument(
         "--trace",
         type=Path,
         metavar="FILE",
         help="the plant's true state over the logged run (.npz, from spm-opt execute --backend "
-        "sim --trace or spm-opt emulate --trace): the true cut is judged too",
+        "sim --trace or spm-opt emulate --trace): the true cut is judged too (default: only the "
+        "logged one)",
     )
     evaluate.add_argument(
         "--other-problem",
         action="store_true",
-        help="judge a log under PROBLEM though it ran under another",
+        help="judge a log under PROBLEM though it ran under another (default: refused)",
     )
     for command in commands.choices.values():
         # -v after the command as well; SUPPRESS keeps a -v given before it
@@ -158,27 +244,45 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
     execute.add_argument(
         "--problem", required=True, type=Path, help="problem TOML whose robot and limits apply"
     )
-    execute.add_argument("--backend", required=True, choices=("sim", "dynamixel"))
+    execute.add_argument(
+        "--backend",
+        required=True,
+        choices=("sim", "dynamixel"),
+        help="sim: the simulated robot; dynamixel: the actuators on --port",
+    )
     execute.add_argument("--log", required=True, type=Path, help="CSV log to write")
-    execute.add_argument("--port", help="serial device of the actuators (dynamixel)")
+    execute.add_argument(
+        "--port", help="serial device of the actuators, e.g. /dev/ttyUSB0 (dynamixel: required)"
+    )
     execute.add_argument(
         "--baud", type=int, default=1_000_000, help="baud rate (dynamixel; default 1000000)"
     )
-    execute.add_argument("--ids", default="1,2", help="actuator ids of theta1,theta2 (dynamixel)")
+    execute.add_argument(
+        "--ids", default="1,2", help="actuator ids of theta1,theta2 (dynamixel; default 1,2)"
+    )
     execute.add_argument(
         "--plant-robot",
         type=Path,
         metavar="FILE",
-        help="robot TOML the simulated robot integrates instead of the problem's (sim)",
+        help="sim: robot TOML the simulated robot integrates (default: the problem's robot)",
     )
-    execute.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="loop rate")
     execute.add_argument(
-        "--approach", action="store_true", help="first move to the plan's start if away from it"
+        "--rate",
+        type=float,
+        default=100.0,
+        metavar="HZ",
+        help="control loop rate, Hz (default 100)",
+    )
+    execute.add_argument(
+        "--approach",
+        action="store_true",
+        help="first move to the plan's start if away from it (default: refuse to start away)",
     )
     execute.add_argument(
         "--other-problem",
         action="store_true",
-        help="run a plan made for another problem (or with no sidecar) under --problem's limits",
+        help="run a plan made for another problem (or with no sidecar) under --problem's limits "
+        "(default: refused)",
     )
     execute.add_argument(
         "--tracking",
@@ -194,13 +298,14 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         "--trace",
         type=Path,
         metavar="FILE",
-        help="sim: save the plant's true state here (.npz; spm-opt evaluate --trace reads it)",
+        help="sim: save the plant's true state here (.npz; spm-opt evaluate --trace reads it; "
+        "default: not saved)",
     )
     execute.add_argument(
         "--start-deg",
         default=None,
         metavar="A,B",
-        help="sim: where the simulated robot rests at the start (default: the plan's start)",
+        help="sim: where the simulated robot rests at the start, deg (default: the plan's start)",
     )
     execute.add_argument(
         "--feed",
@@ -220,7 +325,7 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         "--interactive",
         action="store_true",
         help="steer from the terminal: space hold/resume, + and - feed 10%%, q stop "
-        "(sim: runs on the wall clock)",
+        "(sim: runs on the wall clock; default: no keys)",
     )
 
 
@@ -229,25 +334,36 @@ def _emulate_parser(commands: argparse._SubParsersAction) -> None:
         "emulate", help="two emulated L54 actuators on a pseudo-terminal (Protocol 2.0)"
     )
     emulate.add_argument(
-        "--problem", default=PAPER_PROBLEM, type=Path, help="problem TOML whose robot is emulated"
+        "--problem",
+        default=PAPER_PROBLEM,
+        type=Path,
+        help=f"problem TOML whose robot is emulated (default: {PAPER_PROBLEM})",
     )
     emulate.add_argument(
         "--plant-robot",
         type=Path,
         metavar="FILE",
-        help="robot TOML the emulated actuators drive instead of the problem's",
+        help="robot TOML the emulated actuators drive (default: the problem's robot)",
     )
     emulate.add_argument("--ids", default="1,2", help="actuator ids (default 1,2)")
-    emulate.add_argument("--start-deg", default="0,0", metavar="A,B", help="start angles")
+    emulate.add_argument(
+        "--start-deg", default="0,0", metavar="A,B", help="start angles, deg (default 0,0)"
+    )
     emulate.add_argument(
         "--fault",
         action="append",
         default=[],
-        help="inject a fault (drop, crc, delay, overload, stuck, write), e.g. overload:id=1,at=3",
+        help="inject a fault (drop, crc, delay, overload, stuck, write), e.g. overload:id=1,at=3 "
+        "(repeatable; default none)",
     )
-    emulate.add_argument("--seed", type=int, default=0, help="seed of the current noise")
     emulate.add_argument(
-        "--trace", type=Path, help="save the plant's true state here (.npz) when serving ends"
+        "--seed", type=int, default=0, help="seed of the current noise (default 0)"
+    )
+    emulate.add_argument(
+        "--trace",
+        type=Path,
+        metavar="FILE",
+        help="save the plant's true state here (.npz) when serving ends (default: not saved)",
     )
 
 
@@ -283,6 +399,9 @@ def _execute(args: argparse.Namespace) -> None:
             f"--trace {args.trace}: expected a file name ending in .npz, with --backend sim "
             "(the emulator's own --trace records the plant behind the Dynamixel backend)"
         )
+    check_output_file(args.log, "--log")
+    if args.trace is not None:
+        check_output_file(args.trace, "--trace")
     problem = load_problem(args.problem)
     trajectory = Trajectory.from_csv(args.plan)
     keys = _keys_terminal(args.interactive)
@@ -316,7 +435,7 @@ def _execute(args: argparse.Namespace) -> None:
         f"period error p99 {loop.period_error_p99_ms:.3f} ms, {loop.overruns} overruns"
     )
     if not result.succeeded:
-        raise ExecutionStopped(_outcome(result))
+        raise GateFailed(_outcome(result))
 
 
 def _outcome(result: ExecutionResult) -> str:
@@ -345,9 +464,10 @@ def _keys_terminal(interactive: bool) -> int | None:
     return sys.stdin.fileno()
 
 
-class ExecutionStopped(Exception):
-    """A run that ended in a safe stop, or without rest proven: the command exits with
-    status 1."""
+class GateFailed(Exception):
+    """The command did its work, but the result fails what a script would gate on: a plan
+    or run that breaks a limit, a planner that failed, a run that ended in a safe stop or
+    without rest proven. The command exits with status 1."""
 
 
 def _emulate(args: argparse.Namespace) -> None:
@@ -362,6 +482,8 @@ def _emulate(args: argparse.Namespace) -> None:
     ids = _pair(args.ids, "--ids", int)
     start = np.radians(_pair(args.start_deg, "--start-deg", float))
     faults = parse_faults(args.fault)
+    if args.trace is not None:
+        check_output_file(args.trace, "--trace")
     serve(
         robot,
         ids,
@@ -378,7 +500,8 @@ def _sweep(args: argparse.Namespace) -> None:
     from spm_opt.sweep.runner import run_sweep
     from spm_opt.sweep.spec import load_sweep_spec
 
-    spec = load_sweep_spec(args.spec)
+    check_output_directory(args.out, "--out")
+    spec = load_sweep_spec(args.spec, max_tasks=args.max_tasks)
     tasks = spec.tasks()
     summary = run_sweep(
         tasks,
@@ -401,11 +524,12 @@ def _sweep(args: argparse.Namespace) -> None:
 def _reproduce(args: argparse.Namespace) -> None:
     from spm_opt.reproduce import reproduce
 
-    if not args.problem.is_file():
+    if not args.problem.exists():
         raise InputError(
             f"--problem {args.problem}: no such file (run from the repository's root, or "
             "pass --problem with the path of craniotomy_bone_flap.toml)"
         )
+    check_output_directory(args.out, "--out")
     for path in reproduce(args.problem, args.out):
         print(path)
 
@@ -418,6 +542,7 @@ def _plan(args: argparse.Namespace) -> None:
         raise InputError(f"--out {args.out}: expected a file name ending in .csv")
     if args.rate is not None and not 0.0 < args.rate <= 1e5:
         raise InputError(f"--rate {args.rate}: expected a rate in Hz with 0 < rate <= 100000")
+    check_output_file(args.out, "--out")
     get_planner(args.planner)
     problem = load_problem(args.problem)
     trajectory = plan(problem, args.planner)
@@ -452,6 +577,18 @@ def _evaluate(args: argparse.Namespace) -> None:
     else:
         cuts = [f"## The {name} cut\n\n{report.to_markdown()}" for name, report in judged.items()]
         print("\n".join(cuts), end="")
+    faults = [_faults(name, report) for name, report in judged.items()]
+    if any(faults):
+        raise GateFailed("; ".join(fault for fault in faults if fault))
+
+
+def _faults(name: str, report: Report) -> str:
+    """What fails the gate in one judged cut, in words, or "" if nothing does."""
+    rules = sorted({violation.rule for violation in report.violations})
+    parts = [f"{len(report.violations)} violations ({', '.join(rules)})"] if rules else []
+    if not getattr(report, "completed", True):
+        parts.append("the run did not complete")
+    return f"the {name} cut: {' and '.join(parts)}" if parts else ""
 
 
 def _identify(args: argparse.Namespace) -> None:
@@ -470,12 +607,14 @@ def _identify(args: argparse.Namespace) -> None:
 
     if args.out.suffix != ".toml":
         raise InputError(f"--out {args.out}: expected a robot file name ending in .toml")
+    check_output_file(args.out, "--out")
     problem = load_problem(args.problem)
     settings = (args.cutoff_hz, args.decimation, args.min_speed)
     samples = log_samples(args.logs, *settings)
+    validation = samples if args.validate is None else log_samples([args.validate], *settings)
+    _LOG.info("identify: %d samples from %d logs; fitting", len(samples.q), len(args.logs))
     identification = identify(problem.robot, samples)
     loops = estimate_loops(args.logs, problem.robot)
-    validation = samples if args.validate is None else log_samples([args.validate], *settings)
     on = "the fitted logs" if args.validate is None else f"{args.validate.name} (not fitted)"
     prior = prediction_rms(problem.robot, validation)
     identified = prediction_rms(identification.robot, validation)
@@ -517,12 +656,16 @@ def _compare(args: argparse.Namespace) -> None:
         names = [name.strip() for name in args.planners.split(",") if name.strip()]
         if not names:
             raise InputError(f"--planners {args.planners!r}: expected comma-separated names")
+    check_output_directory(args.out, "--out")
     problem = load_problem(args.problem)
     outcomes = run_planners(
         problem, names, lambda *call: print(progress_line(*call), file=sys.stderr, flush=True)
     )
     for path in write_comparison(problem, outcomes, args.out):
         print(path)
+    failed = [outcome.planner for outcome in outcomes if outcome.error is not None]
+    if failed:
+        raise GateFailed(f"{len(failed)} of {len(outcomes)} planners failed: {', '.join(failed)}")
 
 
 _COMMANDS = {
@@ -593,20 +736,31 @@ def _run(args: argparse.Namespace) -> int:
     except RunInterrupted as interrupted:
         print(f"spm-opt: interrupted: {interrupted}", file=sys.stderr)
         return 130
+    except PlanningError as error:  # a valid problem the planner could not plan
+        print(f"spm-opt: failed: {error}", file=sys.stderr)
+        return 1
     except SpmOptError as error:
         print(f"spm-opt: error: {error}", file=sys.stderr)
         return 2
-    except ExecutionStopped as stopped:
-        print(f"spm-opt: {stopped}", file=sys.stderr)
+    except GateFailed as failed:
+        print(f"spm-opt: {failed}", file=sys.stderr)
         return 1
     except OSError as error:  # an output path that cannot be written: the user can fix it
         where = f"{error.filename}: " if error.filename else ""
         print(f"spm-opt: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("spm-opt: interrupted", file=sys.stderr)
+        print("spm-opt: interrupted: nothing written", file=sys.stderr)
+        _second_interrupt_ends()
         return 130
     return 0
+
+
+def _second_interrupt_ends() -> None:
+    """Let a second Ctrl-C end the process at once: the exit may wait for a compile the
+    interrupted planner started (:mod:`spm_opt.planners.nlp_library`)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 if __name__ == "__main__":

@@ -24,8 +24,8 @@ PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
 
 @pytest.fixture(scope="module")
 def plan_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    plan = tmp_path_factory.mktemp("plan") / "cubic.csv"
-    so.plan(so.load_problem(PAPER_PROBLEM), "cubic").to_csv(plan)
+    plan = tmp_path_factory.mktemp("plan") / "toppra.csv"  # a clean plan: evaluate exits 0
+    so.plan(so.load_problem(PAPER_PROBLEM), "toppra").to_csv(plan)
     return plan
 
 

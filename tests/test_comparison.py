@@ -67,7 +67,7 @@ def test_command_writes_the_table_the_summary_and_the_figures(tmp_path, failing_
     problem = ROOT / "problems" / "craniotomy_bone_flap.toml"
     planners = f"cubic,ruckig,{failing_planner}"
     status = main(["compare", str(problem), "--planners", planners, "--out", str(out)])
-    assert status == 0
+    assert status == 1  # a planner failed; the others' table and figures are written
     figures = ["cuts.png", "headline.png", "joints.png", "tool_speed.png", "torques.png"]
     assert sorted(p.name for p in out.iterdir()) == sorted(
         ["comparison.csv", "comparison.md", *figures]
@@ -87,6 +87,7 @@ def test_command_writes_the_table_the_summary_and_the_figures(tmp_path, failing_
     assert f"**{failing_planner}** failed: PlanningError" in summary
     progress = capsys.readouterr().err
     assert "[3/3] always-fails: PlanningError" in progress
+    assert progress.splitlines()[-1] == "spm-opt: 1 of 3 planners failed: always-fails"
 
 
 def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys):

@@ -77,7 +77,8 @@ def test_a_robot_away_from_the_start_is_refused_or_approached(
 ):
     start = hardware_plan.position(0.0) + np.array([3.0, -2.0]) * DEG
     robot = SimulatedRobot(hardware_problem.robot, start_rad=start)
-    with pytest.raises(PreflightError, match=r"3\.000 deg away .* ask for an approach move"):
+    refusal = r"3\.000 deg away .* ask for an approach move \(spm-opt execute --approach"
+    with pytest.raises(PreflightError, match=refusal):
         execute(hardware_plan, robot, hardware_problem, tmp_path / "refused.csv")
     assert not (tmp_path / "refused.csv").exists()
 

@@ -124,12 +124,17 @@ class Backend(Protocol):
 
     clock: Clock
 
-    def connect(self) -> None: ...
+    def connect(self) -> None:
+        """Open and check the device; enable torque in position mode."""
 
-    def read(self) -> Measurement: ...
+    def read(self) -> Measurement:
+        """Both actuators' state now (CommunicationError when the transaction fails)."""
 
-    def write_goal(self, position_rad: np.ndarray) -> None: ...
+    def write_goal(self, position_rad: np.ndarray) -> None:
+        """Send both goal positions (2,), rad (CommunicationError when it fails)."""
 
-    def close(self) -> None: ...
+    def close(self) -> None:
+        """Release the device; the actuators keep holding their last goal."""
 
-    def describe(self) -> dict[str, Any]: ...
+    def describe(self) -> dict[str, Any]:
+        """Plain data for the log's header: device, settings, counters."""

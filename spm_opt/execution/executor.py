@@ -225,7 +225,8 @@ class Executor:
             raise PreflightError(
                 f"robot at {degrees(measured)}, the plan starts at {degrees(start)}: "
                 f"{distance / DEG:.3f} deg away (tolerance "
-                f"{self.settings.start_tolerance_rad / DEG:.3f} deg); ask for an approach move"
+                f"{self.settings.start_tolerance_rad / DEG:.3f} deg); ask for an approach move "
+                "(spm-opt execute --approach; ExecutionSettings(approach=True))"
             )
         return self._ruckig_segment(
             "approach",

@@ -64,6 +64,7 @@ class SimulatedRobot:
             self.plant.enable_torque(joint, True)
 
     def read(self) -> Measurement:
+        """The plant's state now, as the actuators report it (encoder offsets included)."""
         now = self.clock.now()
         self.plant.advance_to(now - self._epoch)
         self.trace.record(now, self.plant)
@@ -76,6 +77,7 @@ class SimulatedRobot:
         )
 
     def write_goal(self, position_rad: np.ndarray) -> None:
+        """Give both actuators new goals (2,), rad, rounded to whole pulses."""
         self.plant.advance_to(self.clock.now() - self._epoch)
         self.plant.goal_position_rad[:] = self._actuator.angle(self._actuator.pulses(position_rad))
 
@@ -83,6 +85,7 @@ class SimulatedRobot:
         """Nothing to release: the simulated actuators keep holding their goals."""
 
     def describe(self) -> dict[str, Any]:
+        """The simulation's settings, for the log's header."""
         return {
             "backend": "simulated",
             "realtime": self.realtime,

@@ -48,6 +48,7 @@ import numpy as np
 
 from spm_opt.errors import PlanningError
 from spm_opt.evaluate import evaluate
+from spm_opt.interrupt import solve
 from spm_opt.limits import planner_bounds
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
@@ -129,6 +130,7 @@ class ExcitationSettings:
 
     @property
     def period_s(self) -> float:
+        """One period of the excitation, s."""
         return self.duration_s / self.periods
 
 
@@ -368,7 +370,7 @@ class _Design:
             },
         )
         lbg, ubg = np.concatenate(low), np.concatenate(high)
-        solution = solver(x0=start, lbg=lbg, ubg=ubg)
+        solution = solve(solver, x0=start, lbg=lbg, ubg=ubg)
         stats = solver.stats()
         values = np.asarray(solution["g"]).ravel()
         excess = float(np.max(np.maximum(lbg - values, values - ubg), initial=0.0))

@@ -94,6 +94,10 @@ class Solver:
         """The last solve's statistics (CasADi's ``stats()``)."""
         return self.function.stats()
 
+    def name(self) -> str:
+        """The solver's name (CasADi's ``name()``)."""
+        return self.function.name()
+
     def _switch_to_library(self) -> None:
         """Load the library once it exists, if this solver is interpreted."""
         if self.kind != INTERPRETED or self._load is None or not self.library.exists():

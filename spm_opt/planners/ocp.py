@@ -82,6 +82,7 @@ import numpy as np
 from spm_opt.bounds import segment_lower_bounds
 from spm_opt.errors import PlanningError
 from spm_opt.evaluate import Violation, evaluate
+from spm_opt.interrupt import solve
 from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds, contour_tube, planner_bounds
 from spm_opt.model import dynamics, torque_table
 from spm_opt.model.params import MM, Robot
@@ -919,12 +920,12 @@ class OcpPlanner:
         parameters = _parameters(problem, fractions, weights, scales, with_torque)
         box = _bounds(problem, nlp, bounds, settings.timing, nlp.grid.split(guess["x0"])[2])
         started = time.perf_counter()
-        solution = solver(**guess, p=parameters, **box)
+        solution = solve(solver, **guess, p=parameters, **box)
         stats = solver.stats()
         statuses, iterations = [stats["return_status"]], int(stats["iter_count"])
         if stats["return_status"] == ACCEPTABLE:  # loose: re-solve strictly from there
             solver = _solver(segments, settings, with_torque, joint_range, demanded, warm=True)
-            solution = solver(**_continuation(solution), p=parameters, **box)
+            solution = solve(solver, **_continuation(solution), p=parameters, **box)
             stats = solver.stats()
             statuses.append(stats["return_status"])
             iterations += int(stats["iter_count"])

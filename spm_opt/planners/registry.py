@@ -21,7 +21,8 @@ class Planner(Protocol):
 
     name: str
 
-    def plan(self, problem: Problem) -> Trajectory: ...
+    def plan(self, problem: Problem) -> Trajectory:
+        """A trajectory for ``problem``, or PlanningError (InputError for bad options)."""
 
 
 MAX_PLAN_DURATION_S = 3600.0

@@ -1,0 +1,121 @@
+"""Ctrl-C means stop: an interrupted solve is never a plan, and a command ends with exit
+status 130 and nothing written."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from spm_opt.interrupt import solve
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
+IDENTIFICATION = ROOT / "problems" / "identification.toml"
+
+
+def _slow_solver() -> ca.Function:
+    """An NLP that IPOPT takes seconds over (tight tolerance, many variables)."""
+    n = 3000
+    x = ca.SX.sym("x", n)
+    objective = ca.sumsqr(ca.sin(x) * x - 1) + ca.sum1(ca.exp(ca.sin(x)))
+    options = {"max_iter": 3000, "tol": 1e-14, "hessian_approximation": "limited-memory"}
+    return ca.nlpsol(
+        "slow",
+        "ipopt",
+        {"x": x, "f": objective, "g": ca.sin(x[1:] * x[:-1])},
+        {"ipopt": {**options, "print_level": 0, "sb": "yes"}, "print_time": False},
+    )
+
+
+def test_sigint_during_a_casadi_solve_raises_keyboard_interrupt():
+    solver = _slow_solver()
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            solve(solver, x0=np.full(3000, 0.3), lbg=-0.5, ubg=0.5)
+    finally:
+        timer.cancel()
+    # the signal reached IPOPT mid-solve, which returned as CasADi does on Ctrl-C
+    assert solver.stats()["return_status"] == "NonIpopt_Exception_Thrown"
+
+
+def test_a_solve_without_sigint_returns_its_solution():
+    x = ca.SX.sym("x")
+    solver = ca.nlpsol(
+        "quadratic", "ipopt", {"x": x, "f": (x - 2) ** 2}, {"ipopt.print_level": 0, "print_time": 0}
+    )
+    assert float(solve(solver, x0=0.0)["x"]) == pytest.approx(2.0)
+
+
+def _interrupt_when(arguments: list[str], cue: str, cwd: Path) -> tuple[int, list[str]]:
+    """Run ``spm-opt -v ARGUMENTS``, send SIGINT once a stderr line holds ``cue``; returns
+    the exit status and the stderr lines."""
+    command = [sys.executable, "-m", "spm_opt.cli", "-v", *arguments]
+    process = subprocess.Popen(
+        command, cwd=cwd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True
+    )
+    lines: list[str] = []
+    seen = threading.Event()
+
+    def read() -> None:
+        for line in process.stderr:
+            lines.append(line.rstrip("\n"))
+            if cue in line and not seen.is_set():
+                seen.set()
+                process.send_signal(signal.SIGINT)
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    try:
+        status = process.wait(timeout=300)
+    finally:
+        process.kill()
+        reader.join()
+    assert seen.is_set(), f"never saw {cue!r}: {lines[-5:]}"
+    return status, lines
+
+
+def _assert_stopped(status: int, lines: list[str], out: Path) -> None:
+    assert status == 130, lines[-5:]
+    assert lines[-1] == "spm-opt: interrupted: nothing written"
+    assert not any("Traceback" in line for line in lines)
+    assert not out.exists() and not out.with_suffix(".json").exists()
+    if out.parent.exists():
+        assert not [p for p in out.parent.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("planner", "problem"), [("ocp-min-energy", PAPER), ("excitation", IDENTIFICATION)]
+)
+def test_sigint_mid_solve_ends_plan_with_130_and_no_plan(tmp_path, planner, problem):
+    out = tmp_path / "plan.csv"
+    arguments = ["plan", str(problem), "--planner", planner, "--out", str(out)]
+    status, lines = _interrupt_when(arguments, "solving (Ctrl-C stops)", tmp_path)
+    _assert_stopped(status, lines, out)
+
+
+@pytest.mark.slow
+def test_sigint_mid_fit_ends_identify_with_130_and_no_robot_file(tmp_path):
+    import spm_opt as so
+
+    problem = so.load_problem(PAPER)
+    plan = so.plan(problem, "toppra")
+    log = tmp_path / "run.csv"
+    start = plan.position(plan.start_time)
+    so.execute(plan, so.SimulatedRobot(problem.robot, start_rad=start), problem, log)
+    out = tmp_path / "results" / "robot.toml"
+    arguments = ["identify", *[str(log)] * 3, "--problem", str(PAPER), "--out", str(out)]
+    arguments += ["--min-speed", "0.001", "--decimation", "1"]
+    status, lines = _interrupt_when(arguments, "identify: ", tmp_path)
+    _assert_stopped(status, lines, out)
+    assert not out.with_suffix(".md").exists() and not out.with_suffix(".png").exists()
