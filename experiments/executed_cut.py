@@ -29,23 +29,25 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-import spm_opt as so  # noqa: E402
-from spm_opt.evaluate_execution import evaluate_log  # noqa: E402
-from spm_opt.execution.backend import Backend  # noqa: E402
-from spm_opt.limits import contour_tube  # noqa: E402
-from spm_opt.model.params import DEG, MM, Robot  # noqa: E402
-from spm_opt.report.markdown import markdown_table  # noqa: E402
+import spm_opt as so
+from spm_opt.evaluate_execution import evaluate_log
+from spm_opt.execution.backend import Backend
+from spm_opt.limits import contour_tube
+from spm_opt.model.params import DEG, MM, Robot
+from spm_opt.report.markdown import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 TRACKINGS = ("none", "lead")
+FLOOR_MM = 1e-3
+"""The figure's floor for a cut's distance from the contour, mm (log scale)."""
+_COLOURS = {"none": "tab:blue", "lead": "tab:orange", "plan": "0.6"}
+"""The bars' colours: the plan's cut, the true cut with goals unled and led."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -193,31 +195,71 @@ def table(rows: list[Row]) -> str:
 
 
 def figure(rows: list[Row], path: Path) -> None:
-    """Tracking error with and without the lead, per plan (one panel per problem)."""
+    """Per problem (a row of panels), on the plant prototype_plant.toml: the largest true
+    tracking error (deg) and the true cut's largest distance from the contour (mm, log
+    scale, beside the plan's own and the tube), with the goals unled and led, per planner.
+    Written to ``path`` as PNG."""
     problems = list(dict.fromkeys(r.problem for r in rows))
-    fig, axes = plt.subplots(1, len(problems), figsize=(6 * len(problems), 4.5), squeeze=False)
-    for ax, problem in zip(axes[0], problems, strict=True):
+    fig = Figure(figsize=(13, 4.2 * len(problems) + 0.6), layout="constrained")
+    axes = fig.subplots(len(problems), 2, squeeze=False)
+    for (tracking, cut), problem in zip(axes, problems, strict=True):
         mine = [r for r in rows if r.problem == problem and r.plant == "prototype_plant"]
-        planners = list(dict.fromkeys(r.planner for r in mine))
-        x = np.arange(len(planners))
-        for offset, tracking in ((-0.2, "none"), (0.2, "lead")):
-            values = [
-                next(
-                    r.true_tracking_error_deg
-                    for r in mine
-                    if r.planner == p and r.tracking == tracking
-                )
-                for p in planners
-            ]
-            ax.bar(x + offset, values, 0.4, label=f"goals: {tracking}")
-        ax.set_xticks(x, planners, rotation=30, ha="right")
-        ax.set_ylabel("largest true tracking error (deg)")
-        ax.set_title(problem)
-        ax.legend()
-    fig.suptitle("The plant (prototype_plant.toml) against the plan at the logged plan time")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        _tracking_bars(tracking, mine)
+        _cut_bars(cut, mine)
+        tracking.set_title(f"{problem}: largest true tracking error", fontsize=10)
+        cut.set_title(
+            f"{problem}: the cut off the contour (floor {FLOOR_MM:g} mm)",
+            fontsize=10,
+        )
+    handles: dict[str, object] = {}
+    for axis in axes.ravel():
+        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
+            handles.setdefault(label, handle)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=len(handles))
+    fig.suptitle("Each plan executed on the plant (prototype_plant.toml), judged on its true state")
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+
+
+def _value(rows: list[Row], planner: str, tracking: str, field: str) -> float:
+    return next(getattr(r, field) for r in rows if r.planner == planner and r.tracking == tracking)
+
+
+def _tracking_bars(axis: Axes, rows: list[Row]) -> None:
+    """The largest true tracking error per planner (deg), goals unled and led."""
+    planners = list(dict.fromkeys(r.planner for r in rows))
+    x = np.arange(len(planners))
+    for offset, tracking in ((-0.2, "none"), (0.2, "lead")):
+        values = [_value(rows, p, tracking, "true_tracking_error_deg") for p in planners]
+        axis.bar(x + offset, values, 0.4, label=f"goals: {tracking}", color=_COLOURS[tracking])
+    axis.set_xticks(x, planners, rotation=30, ha="right")
+    axis.set_ylabel("largest true tracking error (deg)")
+    axis.grid(True, axis="y", alpha=0.3)
+
+
+def _cut_bars(axis: Axes, rows: list[Row]) -> None:
+    """The plan's and the true cuts' largest distance from the contour per planner (mm, log
+    scale, at least :data:`FLOOR_MM`), and the tube if the problem has one."""
+    planners = list(dict.fromkeys(r.planner for r in rows))
+    x = np.arange(len(planners))
+    planned = [_value(rows, p, "lead", "planned_deviation_mm") for p in planners]
+    axis.bar(
+        x - 0.27,
+        np.maximum(planned, FLOOR_MM),
+        0.27,
+        label="the plan's own cut",
+        color=_COLOURS["plan"],
+    )
+    for offset, tracking in ((0.0, "none"), (0.27, "lead")):
+        values = [_value(rows, p, tracking, "true_deviation_mm") for p in planners]
+        axis.bar(x + offset, np.maximum(values, FLOOR_MM), 0.27, color=_COLOURS[tracking])
+    tube = rows[0].tube_mm
+    if tube is not None:
+        axis.axhline(tube, color="black", linestyle="--", linewidth=1, label="tube")
+    axis.set_yscale("log")
+    axis.set_ylim(bottom=FLOOR_MM / 2)
+    axis.set_xticks(x, planners, rotation=30, ha="right")
+    axis.set_ylabel("largest distance from the contour (mm)")
+    axis.grid(True, axis="y", alpha=0.3)
 
 
 def main(argv: list[str] | None = None) -> int:

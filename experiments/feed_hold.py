@@ -37,6 +37,7 @@ import json
 import sys
 from pathlib import Path
 from tempfile import TemporaryDirectory
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -48,6 +49,9 @@ from spm_opt.model import kinematics
 from spm_opt.model.params import MM, load_robot
 from spm_opt.plots import to_png
 from spm_opt.report.markdown import markdown_table
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
@@ -194,23 +198,31 @@ def report(rows: list[dict], optimal: list[str]) -> str:
     )
 
 
-def figure(rows: list[dict]):
+def figure(rows: list[dict]) -> Figure:
+    """Each hold's stopping distance (mm) and times (s) against when along the paper's plan
+    it was asked for (s), legends beside the panels."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(8, 5), layout="constrained")
+    fig = Figure(figsize=(9, 5.5), layout="constrained")
     distance, time = fig.subplots(2, 1, sharex=True)
     at = [r["hold_s"] for r in rows]
     distance.plot(at, [r["goal_stop_mm"] for r in rows], "o-", label="goal")
-    distance.plot(at, [r["tool_stop_mm"] for r in rows], "s-", label="tool (true)")
+    distance.plot(at, [r["tool_stop_mm"] for r in rows], "s--", label="tool (true)")
     distance.set_ylabel("stopping distance (mm)")
+    distance.set_title("how far the cut goes on after the request", fontsize=10)
     time.plot(at, [r["feed_to_zero_s"] for r in rows], "o-", label="feed to 0")
-    time.plot(at, [r["true_rest_s"] for r in rows], "s-", label="tool at rest (true)")
-    time.plot(at, [r["rest_confirmed_s"] for r in rows], "^-", label="rest confirmed")
+    time.plot(at, [r["true_rest_s"] for r in rows], "s--", label="tool at rest (true)")
+    time.plot(at, [r["rest_confirmed_s"] for r in rows], "^:", label="rest confirmed")
     time.set_ylabel("time after the request (s)")
+    time.set_title("how long it takes", fontsize=10)
     time.set_xlabel("time of the hold along the paper's plan (s)")
     for axis in (distance, time):
         axis.grid(True, alpha=0.3)
-        axis.legend(loc="best", fontsize=8)
+        axis.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
+    fig.suptitle(
+        f"A feed hold from full feed on the paper's plan ({len(rows)} runs, one hold "
+        "each; plant: prototype_plant.toml)"
+    )
     return fig
 
 

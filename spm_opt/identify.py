@@ -719,21 +719,32 @@ def report_markdown(
 
 
 def prediction_figure(prior: Robot, identified: Robot, samples: Samples) -> Figure:
-    """Measured torques against the prior's and the identified robot's predictions,
-    filtered as for the fit, per joint."""
-    figure = Figure(figsize=(9, 5))
+    """Measured torques against the prior's and the identified robot's predictions (N·m),
+    filtered as for the fit, per joint, over the time the kept samples span (s): the
+    stretches where a joint turns slower than the samples' minimum speed are left out and
+    the runs follow each other."""
+    figure = Figure(figsize=(9, 5.5), layout="constrained")
     axes = figure.subplots(2, 1, sharex=True)
     measured = samples.parallel(samples.torque)
+    t = np.arange(len(measured)) * samples.decimation / float(np.median(samples.rates_hz))
     predictions = {
         name: filtered_prediction(robot, samples)
         for name, robot in (("prior", prior), ("identified", identified))
     }
     for joint, axis in enumerate(axes):
-        axis.plot(measured[:, joint], "k-", lw=1.0, label="measured")
+        axis.plot(t, measured[:, joint], "k-", lw=1.0, label="measured")
         for (name, values), style in zip(predictions.items(), ("--", "-"), strict=True):
-            axis.plot(values[:, joint], style, lw=1.0, label=name)
-        axis.set_ylabel(f"τ{joint + 1}, N·m")
+            rms = float(np.sqrt(np.mean((measured[:, joint] - values[:, joint]) ** 2)))
+            axis.plot(t, values[:, joint], style, lw=1.0, label=f"{name} (RMS error {rms:.4f} N·m)")
+        axis.set_ylabel(f"τ{joint + 1} (N·m)")
+        axis.set_title(f"actuator {joint + 1}", fontsize=10)
         axis.grid(True, alpha=0.3)
-    axes[0].legend(loc="best", fontsize=8)
-    axes[1].set_xlabel("sample (moving, after filtering)")
+        axis.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
+    axes[1].set_xlabel("time while both joints move (s)")
+    figure.suptitle(
+        "Torque prediction: measured against the prior and the identified robot\n"
+        f"(low-passed at {samples.cutoff_hz:g} Hz as for the fit; stretches where a joint "
+        f"turns slower than {samples.min_speed_rad_s:g} rad/s left out)",
+        fontsize=11,
+    )
     return figure

@@ -7,11 +7,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from spm_opt.figure_rules import mark_top_view
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 _JOINT_COLOURS = ("tab:blue", "tab:orange")
@@ -22,6 +24,11 @@ def to_png(figure: Figure, dpi: int = 150) -> bytes:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
     return buffer.getvalue()
+
+
+def _legend_beside(axis: Axes) -> None:
+    """The axis's legend to its right, outside the plot: it covers no data."""
+    axis.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
 
 
 def joints_figure(trajectory: Trajectory, title: str, rate_hz: float = 200.0) -> Figure:
@@ -46,8 +53,22 @@ def joints_figure(trajectory: Trajectory, title: str, rate_hz: float = 200.0) ->
     angles.set_ylabel("joint angle (deg)")
     rates.set_ylabel("joint rate (deg/s)")
     rates.set_xlabel("time (s)")
-    angles.set_title(title)
+    figure.suptitle(title)
     return figure
+
+
+def skull_wireframe(axis: Axes, radius_mm: float, label: str | None = None) -> None:
+    """Draw the skull as the upper hemisphere of ``radius_mm`` about the isocenter, in grey,
+    on a 3-D ``axis`` whose unit is mm."""
+    azimuth, polar = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi / 2, 13))
+    axis.plot_wireframe(
+        radius_mm * np.cos(azimuth) * np.sin(polar),
+        radius_mm * np.sin(azimuth) * np.sin(polar),
+        radius_mm * np.cos(polar),
+        color="0.75",
+        linewidth=0.4,
+        label=label,
+    )
 
 
 def path_figure(problem: Problem, trajectory: Trajectory, rate_hz: float = 50.0) -> Figure:
@@ -68,15 +89,7 @@ def path_figure(problem: Problem, trajectory: Trajectory, rate_hz: float = 50.0)
     figure = Figure(figsize=(15, 7), layout="constrained")
     axis = figure.add_subplot(1, 2, 1, projection="3d")
     skull_radius = float(np.mean(np.linalg.norm(landmarks, axis=1)))
-    azimuth, polar = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi / 2, 13))
-    axis.plot_wireframe(
-        skull_radius * np.cos(azimuth) * np.sin(polar),
-        skull_radius * np.sin(azimuth) * np.sin(polar),
-        skull_radius * np.cos(polar),
-        color="0.75",
-        linewidth=0.4,
-        label=f"skull (sphere, r = {skull_radius:.1f} mm)",
-    )
+    skull_wireframe(axis, skull_radius, label=f"skull (sphere, r = {skull_radius:.1f} mm)")
     axis.plot(*platform.T, color="tab:blue", label=f"platform path B(t), r_u = {r_u / MM:g} mm")
     axis.plot(*contour.T, color="tab:green", linestyle="--", linewidth=2, label="planned contour")
     axis.plot(*cut.T, color="tab:red", label="cut on the skull")
@@ -126,6 +139,7 @@ def _top_view(axis, problem: Problem, contour: np.ndarray, cut: np.ndarray) -> N
     axis.set_ylabel("y (mm)")
     axis.set_title("seen from above")
     axis.legend(loc="best", fontsize=8)
+    mark_top_view(axis)
 
 
 def torques_figure(
@@ -153,11 +167,12 @@ def torques_figure(
         top.legend(fontsize=8)
         for (name, difference), style in zip(differences.items(), ("-", ":"), strict=False):
             bottom.plot(t, difference[:, joint], linestyle=style, label=f"Lagrange − {name}")
+        bottom.set_title(f"torque {joint + 1}: the independent checks' differences")
         bottom.set_ylabel("difference (N·m)")
         bottom.set_xlabel("time (s)")
-        bottom.legend(fontsize=8)
         for axis in (top, bottom):
             axis.grid(True, alpha=0.3)
+    figure.legend(*axes[1, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2)
     figure.suptitle("Fig. 13: actuator torques over the paper's trajectory")
     return figure
 
@@ -165,8 +180,9 @@ def torques_figure(
 def friction_figure(
     t: np.ndarray, upper: np.ndarray, lower: np.ndarray, torque: np.ndarray, mu: float
 ) -> Figure:
-    """Fig. 14: friction forces on the platforms with μ = 1 (N, by component), and the
-    actuator torque they cost with the prototype's μ (N·m)."""
+    """Fig. 14: friction forces on the platforms per unit μ (N at μ = 1, by component:
+    friction is proportional to μ, so they read for any rail material), and the actuator
+    torque they cost with the robot's own μ (N·m)."""
     from matplotlib.figure import Figure
 
     figure = Figure(figsize=(10, 8), layout="constrained")
@@ -176,17 +192,22 @@ def friction_figure(
         (axes[1], lower, "F_fl, lower platform"),
     ):
         for component, label in enumerate("xyz"):
-            axis.plot(t, force[:, component], label=f"{label}")
-        axis.set_ylabel("force (N)")
-        axis.set_title(f"{name}, μ = 1")
-        axis.legend(fontsize=8, ncol=3)
+            axis.plot(t, force[:, component], label=f"{label} component")
+        axis.set_ylabel("force at μ = 1 (N)")
+        axis.set_title(f"{name}: friction force per unit μ")
+        _legend_beside(axis)
     for joint, colour in enumerate(_JOINT_COLOURS):
         axes[2].plot(t, torque[:, joint], color=colour, label=f"actuator {joint + 1}")
-    axes[2].set_title(f"torque that friction costs the actuators, μ = {mu:g}")
+    axes[2].set_title(f"torque that friction costs the actuators at the robot's μ = {mu:g}")
     axes[2].set_ylabel("torque (N·m)")
     axes[2].set_xlabel("time (s)")
-    axes[2].legend(fontsize=8)
+    _legend_beside(axes[2])
     for axis in axes:
         axis.grid(True, alpha=0.3)
-    figure.suptitle("Fig. 14: friction along the paper's trajectory")
+    figure.suptitle(
+        "Fig. 14: friction along the paper's trajectory\n"
+        "forces at μ = 1 (friction is proportional to μ: scale them to any rail material); "
+        f"torques at the robot's μ = {mu:g}",
+        fontsize=11,
+    )
     return figure

@@ -1,7 +1,10 @@
-"""Shared fixtures: the paper's problem and its cubic baseline, and the faster run of the
-hardware verification (Section 6) with its cubic plan."""
+"""Shared fixtures: the paper's problem and its cubic baseline, the faster run of the
+hardware verification (Section 6) with its cubic plan, and the check of every figure a
+test saves."""
 
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -30,3 +33,25 @@ def hardware_problem() -> so.Problem:
 @pytest.fixture(scope="session")
 def hardware_plan(hardware_problem: so.Problem) -> so.Trajectory:
     return so.plan(hardware_problem, "cubic")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def saved_figures_keep_the_rules() -> Iterator[None]:
+    """Every figure a test saves is first checked by :func:`spm_opt.figure_rules.
+    figure_faults` (units, titles, legends clear of the data, the anterior on top views):
+    a figure that breaks a rule fails the test, its faults listed."""
+    from matplotlib.figure import Figure
+
+    from spm_opt.figure_rules import figure_faults
+
+    save = Figure.savefig
+
+    def checked(figure: Figure, *args: Any, **kwargs: Any) -> Any:
+        faults = figure_faults(figure)
+        if faults:
+            pytest.fail("a saved figure breaks the figure rules:\n" + "\n".join(faults))
+        return save(figure, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Figure, "savefig", checked)
+        yield

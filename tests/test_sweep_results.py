@@ -353,7 +353,8 @@ def test_the_rates_figure_draws_the_rates_it_is_given() -> None:
     figure = results_figures.flap_rates(rates, ["a", "b"], 7, "Varied")
     first, second = figure.axes
     assert [t.get_text() for t in first.get_xticklabels()] == ["4", "6"]
-    assert first.get_xlabel() == "flap_landmarks" and second.get_xlabel().startswith("limits.")
+    assert first.get_xlabel() == "flap_landmarks (count)"
+    assert second.get_xlabel().startswith("limits.")
     clean_b = [line for line in first.lines if line.get_label() == "b"][0]
     np.testing.assert_array_equal(clean_b.get_ydata(), [50.0, 0.0])
     assert len(second.lines) == 2  # planner b has no group there: nothing drawn
@@ -422,7 +423,7 @@ def test_figures_draw_the_data_they_are_given() -> None:
     axis = figure.axes[0]
     assert sorted(text.get_text() for text in axis.texts) == ["1.5", "2.25*", "failed"]
     assert axis.images[0].get_clim() == (1.5, 9.0)
-    assert axis.get_xlabel() == "mu" and "duration (s)" in axis.get_title()
+    assert axis.get_xlabel() == "mu (-)" and "duration (s)" in axis.get_title()
 
 
 def test_the_figures_module_imports_no_module_that_computes() -> None:

@@ -1,4 +1,5 @@
-"""The comparison's figures: every planner's plan on the same axes, one colour each.
+"""The comparison's figures: every planner's plan on the same axes, one colour and line
+style each.
 
 They take the plans as :class:`Planned` objects (the comparison's ``Outcome`` is one),
 each with a trajectory and the evaluator's report, and never import the comparison.
@@ -11,12 +12,14 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from spm_opt.figure_rules import mark_top_view
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
 from spm_opt.report.columns import column
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
     from spm_opt.trajectory import Trajectory
@@ -52,7 +55,13 @@ class Planned(Protocol):
 
 RATE_HZ = 200.0
 """Sampling rate of the drawn curves, Hz."""
+FLOOR_MM = 1e-6
+"""The deviation panel's floor, mm: a cut on the contour is drawn there."""
 _COLOURS = [f"C{k}" for k in range(10)]
+_LINES = ("-", "--", "-.", ":")
+_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
+_UNITLESS = {"violation_count": "count"}
+"""The unit in the axis label of a headline without one (any other: "-", a ratio)."""
 
 
 def _figure(size: tuple[float, float]) -> Figure:
@@ -63,6 +72,32 @@ def _figure(size: tuple[float, float]) -> Figure:
 
 def _colour(index: int) -> str:
     return _COLOURS[index % len(_COLOURS)]
+
+
+def _style(index: int, samples: int) -> dict[str, object]:
+    """The ``index``-th planner's line of ``samples`` points: its colour, line style and
+    ten markers, shifted per planner so that no two planners' markers coincide."""
+    step = max(1, samples // 10)
+    return {
+        "color": _colour(index),
+        "linestyle": _LINES[index % len(_LINES)],
+        "marker": _MARKERS[index % len(_MARKERS)],
+        "markevery": ((index * step // 7) % step, step),
+        "markersize": 5,
+        "markerfacecolor": "none",
+    }
+
+
+def _legend_below(figure: Figure, axis: Axes) -> None:
+    """The figure's legend, from ``axis``'s labelled lines, below the panels."""
+    handles, labels = axis.get_legend_handles_labels()
+    figure.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 5))
+
+
+def _axis_label(name: str) -> str:
+    """A headline's axis label with its unit: "(-)" for a ratio, "(count)" for a count."""
+    shown = column(name)
+    return shown.label if shown.unit else f"{shown.label} ({_UNITLESS.get(name, '-')})"
 
 
 def _samples(outcome: Planned) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -88,11 +123,11 @@ def joints(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     for index, outcome in enumerate(outcomes):
         t, q, _, _ = _samples(outcome)
         for joint, axis in enumerate(axes):
-            axis.plot(t, q[:, joint] / DEG, color=_colour(index), label=outcome.planner)
+            axis.plot(t, q[:, joint] / DEG, **_style(index, len(t)), label=outcome.planner)
     for joint, axis in enumerate(axes):
         axis.set_ylabel(f"θ{joint + 1} (deg)")
         axis.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8, ncol=2)
+    _legend_below(figure, axes[0])
     axes[1].set_xlabel("time (s)")
     figure.suptitle(f"{problem.name}: joint angles")
     return figure
@@ -106,11 +141,11 @@ def torques(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
         t, q, qd, qdd = _samples(outcome)
         torque = dynamics.actuator_torque(problem.robot, q, qd, qdd)
         for joint, axis in enumerate(axes):
-            axis.plot(t, torque[:, joint], color=_colour(index), label=outcome.planner)
+            axis.plot(t, torque[:, joint], **_style(index, len(t)), label=outcome.planner)
     for joint, axis in enumerate(axes):
         axis.set_ylabel(f"τ{joint + 1} (N·m)")
         axis.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8, ncol=2)
+    _legend_below(figure, axes[0])
     axes[1].set_xlabel("time (s)")
     figure.suptitle(
         f"{problem.name}: actuator torques (limit {problem.max_joint_torque:g} N·m, off scale)"
@@ -125,7 +160,7 @@ def tool_speed(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     axis = figure.subplots()
     for index, outcome in enumerate(outcomes):
         distance, speed = _cut_progress(problem, outcome)
-        axis.plot(distance, speed, color=_colour(index), label=outcome.planner)
+        axis.plot(distance, speed, **_style(index, len(speed)), label=outcome.planner)
     for place, name in zip(
         problem.contour.landmark_arc_lengths / MM, problem.visit_names, strict=True
     ):
@@ -138,47 +173,84 @@ def tool_speed(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     axis.set_xlabel("distance cut so far (mm)")
     axis.set_ylabel("tool speed (mm/s)")
     axis.grid(True, alpha=0.3)
-    axis.legend(fontsize=8, ncol=2)
+    _legend_below(figure, axis)
     axis.set_title(f"{problem.name}: tool speed along the cut")
     return figure
 
 
 def cuts(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
-    """Left: every cut on the skull seen from above (mm) with the planned contour and the
-    landmarks. Right: each cut's distance from the contour (mm, log scale) along it, with
-    the tolerance."""
-    figure = _figure((13, 6))
+    """Left: every cut on the skull seen from above (mm), the planned contour drawn over
+    them, the landmarks and the anterior direction. Right: each cut's distance from the
+    contour (mm, log scale) against the place along the contour it is nearest to (mm),
+    with the landmarks and the tolerance: cuts a tenth of a millimetre apart, one on the
+    other at the left, stand apart there."""
+    figure = _figure((13, 7))
     top, off = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.3]})
     contour = problem.contour
-    planned = contour.point_at(np.linspace(0.0, contour.length, 2000)) / MM
-    top.plot(planned[:, 0], planned[:, 1], color="black", linewidth=3, alpha=0.25)
-    top.plot([], [], color="black", linewidth=3, alpha=0.25, label="planned contour")
     for index, outcome in enumerate(outcomes):
-        t, q, _, _ = _samples(outcome)
-        cut = outcome.trajectory.cut_points(contour, t) / MM  # type: ignore[union-attr]
-        top.plot(cut[:, 0], cut[:, 1], color=_colour(index), linewidth=1, label=outcome.planner)
-        distance, _ = _cut_progress(problem, outcome)
-        deviation = contour.deviation(kinematics.forward_kinematics(q, 1.0)) / MM
-        off.semilogy(distance, np.maximum(deviation, 1e-6), color=_colour(index))
-    landmarks = problem.landmarks / MM
-    top.scatter(landmarks[:, 0], landmarks[:, 1], color="black", s=20, zorder=3)
-    for name, (x, y, _) in zip(problem.landmark_names, landmarks, strict=True):
-        top.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5))
-    top.set_aspect("equal")
-    top.set_xlabel("x (mm)")
-    top.set_ylabel("y (mm)")
-    top.legend(fontsize=8)
-    top.set_title("cuts on the skull, seen from above")
-    if problem.limits.contour_tolerance is not None:
-        off.axhline(problem.limits.contour_tolerance / MM, color="black", linestyle="--")
-        off.annotate("tolerance", (0.0, problem.limits.contour_tolerance / MM), fontsize=8)
-    off.set_xlabel("distance cut so far (mm)")
-    off.set_ylabel("distance from the planned contour (mm)")
-    off.set_title("how far each cut strays (floor 1e-6 mm)")
-    for axis in (top, off):
-        axis.grid(True, alpha=0.3)
-    figure.suptitle(problem.name)
+        _, q, _, _ = _samples(outcome)
+        directions = kinematics.forward_kinematics(q, 1.0)
+        near = contour.nearest(directions)
+        cut = near.radius[:, None] * directions / MM
+        style = _style(index, len(q))
+        top.plot(cut[:, 0], cut[:, 1], **style, linewidth=1, label=outcome.planner)
+        along, deviation = contour.progress(near) / MM, contour.chord(near) / MM
+        off.semilogy(along, np.maximum(deviation, FLOOR_MM), **style, linewidth=1)
+    _contour_from_above(top, problem)
+    _deviation_axes(off, problem)
+    _legend_below(figure, top)
+    figure.suptitle(f"{problem.name}: the planned contour and every planner's cut")
     return figure
+
+
+def _contour_from_above(axis: Axes, problem: Problem) -> None:
+    """The planned contour over the cuts, the landmarks and the anterior arrow (x-y, mm)."""
+    contour = problem.contour
+    planned = contour.point_at(np.linspace(0.0, contour.length, 2000)) / MM
+    axis.plot(*planned[:, :2].T, color="black", linewidth=1.2, zorder=4, label="planned contour")
+    landmarks = problem.landmarks / MM
+    axis.scatter(landmarks[:, 0], landmarks[:, 1], color="black", s=20, zorder=5)
+    for name, (x, y, _) in zip(problem.landmark_names, landmarks, strict=True):
+        axis.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5))
+    axis.set_aspect("equal")
+    axis.set_xlabel("x (mm)")
+    axis.set_ylabel("y (mm)")
+    axis.set_title("seen from above (the contour in black, on top)", fontsize=10)
+    axis.grid(True, alpha=0.3)
+    mark_top_view(axis)
+
+
+def _deviation_axes(axis: Axes, problem: Problem) -> None:
+    """The deviation panel's landmarks, tolerance, floor and words."""
+    for place, name in zip(
+        problem.contour.landmark_arc_lengths / MM, problem.visit_names, strict=True
+    ):
+        axis.axvline(place, color="0.75", linewidth=0.8, zorder=0)
+        axis.annotate(
+            name,
+            (place, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(2, -10),
+            textcoords="offset points",
+            fontsize=8,
+        )
+    tolerance = problem.limits.contour_tolerance
+    if tolerance is not None:
+        axis.axhline(tolerance / MM, color="black", linestyle="--", linewidth=1)
+        axis.annotate(
+            f"tolerance {tolerance / MM:g} mm",
+            (0.0, tolerance / MM),
+            xycoords=("axes fraction", "data"),
+            xytext=(4, 3),
+            textcoords="offset points",
+            fontsize=8,
+        )
+    axis.set_xlabel("place along the planned contour (mm)")
+    axis.set_ylabel("distance from the planned contour (mm)")
+    axis.set_title(
+        f"how far each cut strays (on the contour: drawn at {FLOOR_MM:g} mm)", fontsize=10
+    )
+    axis.grid(True, alpha=0.3)
 
 
 _HEADLINES: tuple[tuple[str, Callable[[Measured], float], bool], ...] = (
@@ -207,6 +279,7 @@ def headline(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
         values = [value(o.report) for o in outcomes]  # type: ignore[arg-type]
         axis.bar(names, values, color=colours, log=log)
         axis.set_title(column(name).label, fontsize=10)
+        axis.set_ylabel(_axis_label(name), fontsize=8)
         axis.tick_params(axis="x", labelrotation=45, labelsize=8)
         axis.grid(True, axis="y", alpha=0.3)
         if drawn_limits.get(name) is not None:

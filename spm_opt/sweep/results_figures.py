@@ -1,9 +1,12 @@
 """A sweep's figures, drawn from the tables :mod:`spm_opt.sweep.results` computes: the key
 metrics against a swept parameter, heat maps of a two-parameter grid, and for bone-flap
 sweeps the planners' robustness (overall and per swept parameter) and the spread of their
-metrics. One colour per planner,
-in the order of the ``planners`` given. Each function takes data and returns a figure;
-none computes a statistic of its own."""
+metrics. One colour and line style per planner, in the order of the ``planners`` given.
+Each function takes data and returns a figure; none computes a statistic of its own.
+
+Axes carry their units: a metric's from :mod:`spm_opt.report.columns` ("(-)" for a
+ratio), a parameter's from the suffix of its key (``_mm_s`` → mm/s; "(count)" for the
+flaps' landmarks, "(-)" for a key without one, such as ``robot.friction.mu``)."""
 
 from __future__ import annotations
 
@@ -21,6 +24,29 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 _COLOURS = [f"C{k}" for k in range(10)]
+_LINES = ("-", "--", "-.", ":")
+_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
+_SUFFIXES = (
+    ("_mm_s", "mm/s"),
+    ("_rad_s2", "rad/s²"),
+    ("_rad_s3", "rad/s³"),
+    ("_rad_s", "rad/s"),
+    ("_deg_s", "deg/s"),
+    ("_kg_m2", "kg·m²"),
+    ("_mm", "mm"),
+    ("_kg", "kg"),
+    ("_deg", "deg"),
+    ("_rpm", "rpm"),
+    ("_nm", "N·m"),
+    ("_hz", "Hz"),
+    ("_s", "s"),
+)
+"""A parameter key's suffix and the unit it names, longest first."""
+_COUNTS = ("flap_landmarks",)
+"""Parameters that count."""
+LOG_SPAN = 100.0
+"""A metric is drawn on a log axis (a histogram's bins log-spaced) when its values are
+positive and span more than this factor."""
 
 
 def _figure(size: tuple[float, float]) -> Figure:
@@ -31,6 +57,39 @@ def _figure(size: tuple[float, float]) -> Figure:
 
 def _colour(index: int) -> str:
     return _COLOURS[index % len(_COLOURS)]
+
+
+def _style(index: int) -> dict[str, object]:
+    """The ``index``-th planner's colour, line style and marker."""
+    return {
+        "color": _colour(index),
+        "linestyle": _LINES[index % len(_LINES)],
+        "marker": _MARKERS[index % len(_MARKERS)],
+    }
+
+
+def _metric_label(metric: str) -> str:
+    """A metric's axis label with its unit ("(-)" for a ratio)."""
+    shown = column(metric)
+    return shown.label if shown.unit else f"{shown.label} (-)"
+
+
+def _parameter_label(parameter: str) -> str:
+    """A parameter's axis label: its key and the unit its suffix names, "count" or "-"."""
+    if parameter in _COUNTS:
+        return f"{parameter} (count)"
+    unit = next((unit for suffix, unit in _SUFFIXES if parameter.endswith(suffix)), "-")
+    return f"{parameter} ({unit})"
+
+
+def _legend_outside(figure: Figure, axis: Axes, below: bool = True) -> None:
+    """The figure's legend, from ``axis``'s labelled artists, below the panels (or right
+    of them, where a supxlabel is below)."""
+    handles, labels = axis.get_legend_handles_labels()
+    if below:
+        figure.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6))
+    else:
+        figure.legend(handles, labels, loc="outside right upper")
 
 
 def _panels(figure: Figure, count: int, columns: int) -> list[Axes]:
@@ -77,28 +136,27 @@ def against(
         mine = medians[medians["planner"] == planner]
         if mine.empty:  # none of its tasks has the parameter
             continue
-        colour = _colour(index)
+        style = _style(index)
         dots = points[points["planner"] == planner]
         for axis, metric in zip(axes, metrics, strict=False):
-            axis.scatter(dots[parameter], dots[metric], s=10, alpha=0.3, color=colour, lw=0)
-            axis.plot(mine["at"], mine[metric], "o-", color=colour, markersize=4)
-        axes[-1].plot(mine["at"], 100 * mine["clean_rate"], "o-", color=colour, ms=4, label=planner)
-        axes[-1].plot(mine["at"], 100 * mine["planned_rate"], "--", color=colour)
+            axis.scatter(dots[parameter], dots[metric], s=10, alpha=0.3, color=style["color"], lw=0)
+            axis.plot(mine["at"], mine[metric], **style, markersize=4)
+        axes[-1].plot(mine["at"], 100 * mine["clean_rate"], **style, ms=4, label=planner)
+        axes[-1].plot(mine["at"], 100 * mine["planned_rate"], ":", color=style["color"], lw=1)
     for axis, metric in zip(axes, metrics, strict=False):
-        axis.set_title(column(metric).label, fontsize=10)
-        values = points[metric].dropna()
-        if len(values) and values.min() > 0 and values.max() > 1e3 * values.min():
+        axis.set_ylabel(_metric_label(metric))
+        if _log_spaced(points[metric].dropna().to_numpy()):
             axis.set_yscale("log")
-    axes[-1].set_title("tasks clean (solid), planned (dashed), %", fontsize=10)
+    axes[-1].set_ylabel("tasks clean (marked), planned (dotted) (%)", fontsize=9)
     axes[-1].set_ylim(-5, 105)
     for axis in axes:
         axis.grid(True, alpha=0.3)
-    axes[-1].legend(fontsize=8)
-    figure.supxlabel(parameter)
     figure.suptitle(
         f"{name}: key metrics against {parameter} (dots: planned tasks; lines: medians"
         + (f" of {bins} quantile bins)" if bins else ")")
     )
+    figure.supxlabel(_parameter_label(parameter))
+    _legend_outside(figure, axes[-1], below=False)
     return figure
 
 
@@ -119,7 +177,9 @@ def heatmap(
     cells : pandas.DataFrame
         Per cell of every planner: columns ``x``, ``y`` (the indices of the cell's values,
         from 0), ``planner``, ``planned``, ``clean`` (counts) and ``median`` (the metric's,
-        over the planned tasks). The colour scale spans every planner's cells.
+        over the planned tasks). The colour scale spans every planner's cells, unless the
+        planner's own cells all hold one value: then the title says so and the colour bar
+        shows that value alone.
     parameters : (str, str)
         The parameters across and up.
     planner, metric, name : str
@@ -129,19 +189,20 @@ def heatmap(
     """
     import matplotlib as mpl
 
-    finite = cells["median"].dropna()
-    low, high = (finite.min(), finite.max()) if len(finite) else (0.0, 1.0)
+    mine = cells[cells["planner"] == planner]
+    constant = _constant(mine["median"])
+    low, high = _colour_range(cells["median"] if constant is None else mine["median"])
     columns, rows = labels
     grid = np.full((len(rows), len(columns)), np.nan)
-    figure = _figure((2.2 + 1.1 * len(columns), 1.6 + 0.8 * len(rows)))
+    figure = _figure((2.2 + 1.1 * len(columns), 1.8 + 0.8 * len(rows)))
     axis = figure.subplots()
-    for cell in cells[cells["planner"] == planner].itertuples(index=False):
+    for cell in mine.itertuples(index=False):
         grid[cell.y, cell.x] = cell.median
         if cell.planned == 0:
             text, shade = "failed", 1.0
         else:
             text = f"{cell.median:.3g}" + ("*" if cell.clean < cell.planned else "")
-            shade = (cell.median - low) / (high - low) if high > low else 0.5
+            shade = (cell.median - low) / (high - low)
         colour = "white" if shade < 0.6 else "black"
         axis.text(cell.x, cell.y, text, ha="center", va="center", fontsize=9, color=colour)
     image = axis.imshow(
@@ -152,17 +213,39 @@ def heatmap(
         vmin=low,
         vmax=high,
     )
-    figure.colorbar(image, ax=axis, label=column(metric).label)
+    bar = figure.colorbar(image, ax=axis, label=_metric_label(metric))
+    if constant is not None:
+        bar.set_ticks([constant], labels=[f"{constant:.4g}"])
     axis.set_xticks(range(len(columns)), list(columns))
     axis.set_yticks(range(len(rows)), list(rows))
-    axis.set_xlabel(parameters[0])
-    axis.set_ylabel(parameters[1])
+    axis.set_xlabel(_parameter_label(parameters[0]))
+    axis.set_ylabel(_parameter_label(parameters[1]))
     axis.set_title(
         f"{name}, {planner}: median {column(metric).label}\n"
-        "(*: a task of the cell breaks a limit; failed: none planned)",
+        + (f"constant: every planned cell {constant:.4g}; " if constant is not None else "")
+        + "*: a task of the cell breaks a limit; failed: none planned",
         fontsize=10,
     )
     return figure
+
+
+def _constant(values: pd.Series) -> float | None:
+    """The one value of ``values`` (NaN left out), or None if they hold none or several."""
+    finite = values.dropna().unique()
+    return float(finite[0]) if len(finite) == 1 else None
+
+
+def _colour_range(values: pd.Series) -> tuple[float, float]:
+    """A colour scale over ``values`` (NaN left out): from the least to the greatest, or,
+    if they are one value, a narrow band about it (0.1 % each side, or ±1 about 0)."""
+    finite = values.dropna()
+    if finite.empty:
+        return 0.0, 1.0
+    low, high = float(finite.min()), float(finite.max())
+    if high > low:
+        return low, high
+    half = 1e-3 * abs(low) or 1.0
+    return low - half, low + half
 
 
 def flap_robustness(table: pd.DataFrame, flaps: int, name: str) -> Figure:
@@ -172,22 +255,32 @@ def flap_robustness(table: pd.DataFrame, flaps: int, name: str) -> Figure:
     columns ``tasks``, ``planned``, ``clean`` (counts) and ``planned_rate``,
     ``clean_rate`` (fractions); ``flaps`` is the number of flaps, for the title.
     """
-    figure = _figure((1.5 + 1.2 * len(table), 4.5))
+    import matplotlib as mpl
+
+    figure = _figure((1.5 + 1.2 * len(table), 4.8))
     axis = figure.subplots()
     at = np.arange(len(table))
     colours = [_colour(k) for k in range(len(table))]
-    for offset, share, count, style in (
-        (-0.2, "planned_rate", "planned", {"alpha": 0.45, "label": "planned"}),
-        (0.2, "clean_rate", "clean", {"label": "clean (no limit broken)"}),
+    for offset, share, count, alpha in (
+        (-0.2, "planned_rate", "planned", 0.45),
+        (0.2, "clean_rate", "clean", 1.0),
     ):
-        bars = axis.bar(at + offset, 100 * table[share], width=0.4, color=colours, **style)
+        bars = axis.bar(at + offset, 100 * table[share], width=0.4, color=colours, alpha=alpha)
         counts = [f"{k}/{n}" for k, n in zip(table[count], table["tasks"], strict=True)]
         axis.bar_label(bars, counts, fontsize=8)
     axis.set_xticks(at, list(table.index))
     axis.set_ylim(0, 110)
     axis.set_ylabel("tasks (%)")
     axis.grid(True, axis="y", alpha=0.3)
-    axis.legend(fontsize=8, loc="lower right")
+    figure.legend(
+        handles=[
+            mpl.patches.Patch(color="0.5", alpha=0.45, label="planned (left, pale)"),
+            mpl.patches.Patch(color="0.5", label="clean: no limit broken (right)"),
+        ],
+        loc="outside lower center",
+        ncol=2,
+        fontsize=8,
+    )
     axis.set_title(f"{name}: robustness over {flaps} generated bone flaps", fontsize=10)
     return figure
 
@@ -195,8 +288,11 @@ def flap_robustness(table: pd.DataFrame, flaps: int, name: str) -> Figure:
 def flap_rates(
     rates: Mapping[str, pd.DataFrame], planners: Sequence[str], flaps: int, name: str
 ) -> Figure:
-    """A panel per parameter: each planner's share of tasks clean (solid) and planned
-    (dashed), %, per value or bin of the parameter.
+    """A panel per parameter: each planner's share of tasks clean (marked) and planned
+    (dotted), %, per value or bin of the parameter. A parameter with as many values as
+    there are flaps has one flap per value, where a share is one flap's outcome: its panel
+    shows each flap's outcome per planner instead (clean, breaks a limit, failed), and
+    says so.
 
     Parameters
     ----------
@@ -207,53 +303,108 @@ def flap_rates(
     planners : sequence of str
         Every planner of the sweep, in the order of their colours.
     flaps : int
-        The number of flaps, for the title.
+        The number of flaps, for the title and to tell a parameter with one flap per value.
     name : str
         The sweep's name, for the title.
     """
-    figure = _figure((4.2 * min(4, len(rates)), 3.6 * math.ceil(len(rates) / 4)))
+    figure = _figure((4.6 * min(4, len(rates)), 3.8 * math.ceil(len(rates) / 4) + 0.6))
     axes = _panels(figure, len(rates), 4)
     for axis, (parameter, table) in zip(axes, rates.items(), strict=True):
         labels = list(dict.fromkeys(table["group"]))
         at = {label: k for k, label in enumerate(labels)}
-        for index, planner in enumerate(planners):
-            mine = table[table["planner"] == planner]
-            if mine.empty:  # none of its tasks has the parameter
-                continue
-            x = [at[label] for label in mine["group"]]
-            colour = _colour(index)
-            axis.plot(x, 100 * mine["clean_rate"], "o-", color=colour, ms=4, label=planner)
-            axis.plot(x, 100 * mine["planned_rate"], "--", color=colour)
+        if len(labels) == flaps:
+            _outcomes(axis, table, planners, at)
+        else:
+            _shares(axis, table, planners, at)
         axis.set_xticks(range(len(labels)), labels, rotation=30 if len(labels) > 4 else 0)
-        axis.set_xlabel(parameter)
-        axis.set_ylim(-5, 105)
+        axis.set_xlabel(_parameter_label(parameter))
         axis.grid(True, alpha=0.3)
-    axes[0].set_ylabel("tasks clean (solid), planned (dashed), %")
-    axes[0].legend(fontsize=8)
     figure.suptitle(f"{name}: robustness over {flaps} generated bone flaps, per parameter")
+    handles: dict[str, object] = {}
+    for axis in axes:
+        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
+            handles.setdefault(label, handle)
+    order = [*planners, *(label for label, _ in _OUTCOMES)]
+    labels = sorted(handles, key=order.index)
+    figure.legend([handles[k] for k in labels], labels, loc="outside lower center", ncol=6)
     return figure
 
 
+_OUTCOMES = (
+    ("clean", {"marker": "o", "color": "tab:green"}),
+    ("breaks a limit", {"marker": "^", "color": "tab:orange"}),
+    ("failed", {"marker": "x", "color": "tab:red"}),
+)
+"""How a flap's outcome is drawn where each value has one flap."""
+
+
+def _shares(axis: Axes, table: pd.DataFrame, planners: Sequence[str], at: dict) -> None:
+    """Each planner's shares of tasks clean (marked) and planned (dotted), %, per group."""
+    for index, planner in enumerate(planners):
+        mine = table[table["planner"] == planner]
+        if mine.empty:  # none of its tasks has the parameter
+            continue
+        x = [at[label] for label in mine["group"]]
+        style = _style(index)
+        axis.plot(x, 100 * mine["clean_rate"], **style, ms=4, label=planner)
+        axis.plot(x, 100 * mine["planned_rate"], ":", color=style["color"], lw=1)
+    axis.set_ylim(-5, 105)
+    axis.set_ylabel("tasks (%)")
+    axis.set_title("tasks clean (marked), planned (dotted)", fontsize=10)
+
+
+def _outcomes(axis: Axes, table: pd.DataFrame, planners: Sequence[str], at: dict) -> None:
+    """Each planner's outcome (a row of marks) on the one flap of each value."""
+    for row, planner in enumerate(planners):
+        mine = table[table["planner"] == planner]
+        outcome = np.where(mine["clean_rate"] > 0, 0, np.where(mine["planned_rate"] > 0, 1, 2))
+        x = np.array([at[label] for label in mine["group"]])
+        for code, (label, style) in enumerate(_OUTCOMES):
+            shown = outcome == code
+            if shown.any():
+                axis.plot(x[shown], np.full(shown.sum(), row), ls="none", **style, label=label)
+    axis.set_yticks(range(len(planners)), list(planners))
+    axis.set_ylim(len(planners) - 0.5, -0.5)
+    axis.set_title("one flap per value: each mark is one flap, not a rate", fontsize=10)
+
+
 def histograms(points: pd.DataFrame, planners: Sequence[str], name: str) -> Figure:
-    """A panel per metric: each planner's histogram over its planned tasks (shared bins).
+    """A panel per metric: each planner's histogram over its planned tasks (shared bins,
+    log-spaced on a log axis where the values span more than :data:`LOG_SPAN`).
 
     ``points`` are the planned tasks: column ``planner`` and one per metric; ``planners``
     every planner of the sweep, in the order of their colours.
     """
     metrics = [m for m in points.columns if m != "planner"]
-    figure = _figure((4.2 * min(4, len(metrics)), 3.4 * math.ceil(len(metrics) / 4)))
+    figure = _figure((4.2 * min(4, len(metrics)), 3.4 * math.ceil(len(metrics) / 4) + 0.6))
     axes = _panels(figure, len(metrics), 4)
     for axis, metric in zip(axes, metrics, strict=True):
         values = points[metric].dropna()
-        edges = np.histogram_bin_edges(values, bins=min(30, max(5, int(len(values) ** 0.5))))
+        edges = _bins(values.to_numpy())
         for index, planner in enumerate(planners):
             mine = points.loc[points["planner"] == planner, metric].dropna()
             if len(mine):
-                colour = _colour(index)
-                axis.hist(mine, edges, histtype="step", lw=1.5, color=colour, label=planner)
-        axis.set_title(column(metric).label, fontsize=10)
+                style = {"color": _colour(index), "linestyle": _LINES[index % len(_LINES)]}
+                axis.hist(mine, edges, histtype="step", lw=1.5, **style, label=planner)
+        if _log_spaced(values.to_numpy()):
+            axis.set_xscale("log")
+        axis.set_xlabel(_metric_label(metric))
+        axis.set_ylabel("planned tasks (count)", fontsize=8)
         axis.grid(True, alpha=0.3)
-    axes[0].set_ylabel("planned tasks")
-    axes[0].legend(fontsize=8)
     figure.suptitle(f"{name}: key metrics over the generated bone flaps, per planner")
+    _legend_outside(figure, axes[0])
     return figure
+
+
+def _log_spaced(values: np.ndarray) -> bool:
+    """Whether ``values`` are positive and span more than :data:`LOG_SPAN`."""
+    return bool(len(values) and values.min() > 0 and values.max() > LOG_SPAN * values.min())
+
+
+def _bins(values: np.ndarray) -> np.ndarray:
+    """Histogram bin edges for ``values``: about √n of them (5–30), log-spaced if
+    :func:`_log_spaced`."""
+    count = min(30, max(5, int(len(values) ** 0.5)))
+    if _log_spaced(values):
+        return np.geomspace(values.min(), values.max(), count + 1)
+    return np.histogram_bin_edges(values, bins=count)

@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 from spm_opt.errors import InputError
 from spm_opt.evaluate_execution import LogReports, evaluate_log, tracking_error
 from spm_opt.execution.log import read_log
+from spm_opt.figure_rules import mark_top_view
 from spm_opt.files import write_atomically
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
@@ -362,7 +363,7 @@ def torque_figure(problem: Problem, samples: RunSamples, joint: int) -> Figure:
 
     model = model_torque(problem, samples)[:, joint]
     measured = samples.measured_torque[:, joint]
-    figure = Figure(figsize=(8, 4), layout="constrained")
+    figure = Figure(figsize=(8, 4.6), layout="constrained")
     axis = figure.subplots()
     shade_holds(axis, samples)
     axis.plot(samples.t, measured, color="0.6", linewidth=0.8, label="measured (from current)")
@@ -378,7 +379,7 @@ def torque_figure(problem: Problem, samples: RunSamples, joint: int) -> Figure:
     axis.set_xlabel("run time (s)")
     axis.set_ylabel("torque (N·m)")
     axis.grid(True, alpha=0.3)
-    axis.legend(loc="best")
+    figure.legend(*axis.get_legend_handles_labels(), loc="outside lower center", ncol=2)
     return figure
 
 
@@ -416,46 +417,82 @@ def tracking_figure(samples: RunSamples) -> Figure:
     for axis in axes:
         shade_holds(axis, samples)
         axis.grid(True, alpha=0.3)
-        axis.legend(loc="best", fontsize=8)
+        axis.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
+    figure.suptitle("Joint angles, planned (at the logged plan time) and measured (Fig. 15)")
     return figure
 
 
 def _feed_panel(axis: Axes, samples: RunSamples) -> None:
     axis.plot(samples.t, samples.feed, color="k", label="feed")
     axis.plot(samples.t, samples.feed_target, color="tab:red", linestyle="--", label="target")
-    axis.set_ylabel("feed")
+    axis.set_ylabel("feed (-)")
     axis.set_ylim(-0.05, max(1.0, float(np.max(samples.feed_target))) + 0.1)
 
 
 def cut_figure(samples: RunSamples, cut: CutComparison, holds: list[Hold]) -> Figure:
-    """The executed cut against the plan's seen from above (x, y, mm), with a numbered
-    marker where each hold's feed reached 0."""
+    """Left: the executed cut and the plan's seen from above (x, y, mm). Right: the executed
+    cut's distance from the plan's cut (mm) along the plan's cut (mm), where the two,
+    which coincide at the scale of the cut, stand apart. Both with a numbered marker where
+    each hold's feed reached 0."""
     from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(7, 6), layout="constrained")
-    axis = figure.subplots()
+    figure = Figure(figsize=(12, 5.5), layout="constrained")
+    top, off = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.4]})
     planned, executed = cut.planned_m / MM, cut.executed_m / MM
-    axis.plot(planned[:, 0], planned[:, 1], color="tab:blue", linewidth=2.0, label="plan")
-    axis.plot(executed[:, 0], executed[:, 1], color="tab:red", linewidth=0.7, label="executed")
-    stops = [
+    along, distance = _along_plan(samples, cut), cut.distance_m / MM
+    top.plot(planned[:, 0], planned[:, 1], color="tab:blue", linewidth=2.0, label="plan")
+    top.plot(executed[:, 0], executed[:, 1], color="tab:red", linewidth=0.7, label="executed")
+    off.plot(along, distance, color="tab:red", linewidth=0.7)
+    stops = [(number, int(np.argmin(np.abs(samples.t - at)))) for number, at in _stops(holds)]
+    _mark_stops(top, executed[:, :2], stops, "hold: feed at 0")
+    _mark_stops(off, np.column_stack([along, distance]), stops)
+    top.set_title("seen from above", fontsize=10)
+    top.set_xlabel("x (mm)")
+    top.set_ylabel("y (mm)")
+    top.set_aspect("equal")
+    mark_top_view(top)
+    off.set_title("the executed cut's distance from the plan's cut", fontsize=10)
+    off.set_xlabel("distance along the plan's cut (mm)")
+    off.set_ylabel("distance from the plan's cut (mm)")
+    for axis in (top, off):
+        axis.grid(True, alpha=0.3)
+    figure.legend(*top.get_legend_handles_labels(), loc="outside lower center", ncol=3)
+    figure.suptitle(f"Executed cut against the plan: largest distance {cut.max_distance_mm:.3f} mm")
+    return figure
+
+
+def _mark_stops(
+    axis: Axes, points: np.ndarray, stops: list[tuple[int, int]], label: str = "_nolegend_"
+) -> None:
+    """A numbered white marker at ``points[index]`` (N, 2) for each (number, index) of
+    ``stops``, the first labelled ``label``."""
+    for k, (number, index) in enumerate(stops):
+        point = tuple(points[index])
+        shown = label if k == 0 else "_nolegend_"
+        axis.plot(*point, "o", color="k", markerfacecolor="white", label=shown)
+        axis.annotate(str(number), point, xytext=(4, 4), textcoords="offset points")
+
+
+def _stops(holds: list[Hold]) -> list[tuple[int, float]]:
+    """(number from 1, run time in s) of each hold whose feed reached 0."""
+    return [
         (number, hold.asked_s + hold.to_held_s)
         for number, hold in enumerate(holds, start=1)
         if hold.to_held_s is not None
     ]
-    for k, (number, at) in enumerate(stops):
-        x, y = executed[int(np.argmin(np.abs(samples.t - at))), :2]
-        label = "hold: feed at 0" if k == 0 else "_nolegend_"
-        axis.plot(x, y, "o", color="k", markerfacecolor="white", label=label)
-        axis.annotate(str(number), (x, y), xytext=(4, 4), textcoords="offset points")
-    axis.set_title(
-        f"executed cut against the plan: largest distance {cut.max_distance_mm:.3f} mm", fontsize=10
-    )
-    axis.set_xlabel("x (mm)")
-    axis.set_ylabel("y (mm)")
-    axis.set_aspect("equal")
-    axis.grid(True, alpha=0.3)
-    axis.legend(loc="best", fontsize=8)
-    return figure
+
+
+def _along_plan(samples: RunSamples, cut: CutComparison) -> np.ndarray:
+    """How far along the plan's cut (N,), mm, each sample's commanded point lies: the
+    length of the plan's cut through the points commanded up to it (at the planned angles,
+    on the skull radius of the plan's nearest point), still while the feed is held."""
+    planned = cut.planned_m[::10]
+    radius = np.linalg.norm(planned, axis=1)
+    directions = kinematics.forward_kinematics(samples.planned_q, 1.0)
+    nearest = cKDTree(planned / radius[:, None]).query(directions)[1]
+    points = directions * radius[nearest, None]
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(steps)]) / MM
 
 
 def capture_figure(
@@ -464,12 +501,12 @@ def capture_figure(
     tracked_m: np.ndarray,
     comparison: MotionCaptureComparison,
 ) -> Figure:
-    """Desired and tracked platform paths seen from above, with their centroids (the
-    paper's Figs. 25–26)."""
+    """Desired and tracked platform paths seen from above (x, y, mm), with their centroids
+    (the paper's Figs. 25–26); the legend below the plot, clear of the centroids."""
     from matplotlib.figure import Figure
 
     desired = kinematics.forward_kinematics(samples.planned_q, problem.robot.upper_platform_radius)
-    figure = Figure(figsize=(7, 6), layout="constrained")
+    figure = Figure(figsize=(7, 6.5), layout="constrained")
     axis = figure.subplots()
     axis.plot(desired[:, 0] / MM, desired[:, 1] / MM, color="tab:blue", label="desired")
     axis.plot(
@@ -497,7 +534,8 @@ def capture_figure(
     axis.set_ylabel("y (mm)")
     axis.set_aspect("equal")
     axis.grid(True, alpha=0.3)
-    axis.legend(loc="best", fontsize=8)
+    mark_top_view(axis)
+    figure.legend(*axis.get_legend_handles_labels(), loc="outside lower center", ncol=2)
     return figure
 
 
