@@ -385,15 +385,19 @@ def _execute(args: argparse.Namespace) -> None:
     from spm_opt.problem import load_problem
     from spm_opt.trajectory import Trajectory
 
-    settings = ExecutionSettings(
-        rate_hz=args.rate,
-        approach=args.approach,
-        feed=args.feed,
-        max_feed=max(ExecutionSettings.max_feed, args.feed),
-        max_hold_s=args.max_hold,
-        other_problem=args.other_problem,
-        tracking=args.tracking,
-    )
+    try:
+        settings = ExecutionSettings(
+            rate_hz=args.rate,
+            approach=args.approach,
+            feed=args.feed,
+            max_feed=max(ExecutionSettings.max_feed, args.feed),
+            max_hold_s=args.max_hold,
+            other_problem=args.other_problem,
+            tracking=args.tracking,
+        )
+    except InputError as error:  # name the option the user gave, not the setting
+        setting = str(error).split(" = ")[0]
+        raise InputError(f"{_SETTING_OPTIONS.get(setting, setting)}: {error}") from None
     if args.trace is not None and (args.backend != "sim" or args.trace.suffix != ".npz"):
         raise InputError(
             f"--trace {args.trace}: expected a file name ending in .npz, with --backend sim "
@@ -436,6 +440,16 @@ def _execute(args: argparse.Namespace) -> None:
     )
     if not result.succeeded:
         raise GateFailed(_outcome(result))
+
+
+_SETTING_OPTIONS = {
+    "rate_hz": "--rate",
+    "feed": "--feed",
+    "max_feed": "--feed",
+    "max_hold_s": "--max-hold",
+    "tracking": "--tracking",
+}
+"""The execute option that sets each :class:`~spm_opt.execution.ExecutionSettings` field."""
 
 
 def _outcome(result: ExecutionResult) -> str:
