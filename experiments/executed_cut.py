@@ -39,6 +39,7 @@ from spm_opt.execution.backend import Backend
 from spm_opt.limits import contour_tube
 from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.markdown import markdown_table
+from spm_opt.report.planner_style import labelled_handles
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")
@@ -211,10 +212,7 @@ def figure(rows: list[Row], path: Path) -> None:
             f"{problem}: the cut off the contour (floor {FLOOR_MM:g} mm)",
             fontsize=10,
         )
-    handles: dict[str, object] = {}
-    for axis in axes.ravel():
-        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
-            handles.setdefault(label, handle)
+    handles = labelled_handles(axes.ravel())
     fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=len(handles))
     fig.suptitle("Each plan executed on the plant (prototype_plant.toml), judged on its true state")
     fig.savefig(path, dpi=120, bbox_inches="tight")

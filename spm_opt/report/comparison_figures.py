@@ -17,6 +17,7 @@ from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
 from spm_opt.report.columns import column
+from spm_opt.report.planner_style import metric_label, new_figure, planner_style
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -57,21 +58,6 @@ RATE_HZ = 200.0
 """Sampling rate of the drawn curves, Hz."""
 FLOOR_MM = 1e-6
 """The deviation panel's floor, mm: a cut on the contour is drawn there."""
-_COLOURS = [f"C{k}" for k in range(10)]
-_LINES = ("-", "--", "-.", ":")
-_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
-_UNITLESS = {"violation_count": "count"}
-"""The unit in the axis label of a headline without one (any other: "-", a ratio)."""
-
-
-def _figure(size: tuple[float, float]) -> Figure:
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=size, layout="constrained")
-
-
-def _colour(index: int) -> str:
-    return _COLOURS[index % len(_COLOURS)]
 
 
 def _style(index: int, samples: int) -> dict[str, object]:
@@ -79,9 +65,7 @@ def _style(index: int, samples: int) -> dict[str, object]:
     ten markers, shifted per planner so that no two planners' markers coincide."""
     step = max(1, samples // 10)
     return {
-        "color": _colour(index),
-        "linestyle": _LINES[index % len(_LINES)],
-        "marker": _MARKERS[index % len(_MARKERS)],
+        **planner_style(index),
         "markevery": ((index * step // 7) % step, step),
         "markersize": 5,
         "markerfacecolor": "none",
@@ -92,12 +76,6 @@ def _legend_below(figure: Figure, axis: Axes) -> None:
     """The figure's legend, from ``axis``'s labelled lines, below the panels."""
     handles, labels = axis.get_legend_handles_labels()
     figure.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 5))
-
-
-def _axis_label(name: str) -> str:
-    """A headline's axis label with its unit: "(-)" for a ratio, "(count)" for a count."""
-    shown = column(name)
-    return shown.label if shown.unit else f"{shown.label} ({_UNITLESS.get(name, '-')})"
 
 
 def _samples(outcome: Planned) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -118,7 +96,7 @@ def _cut_progress(problem: Problem, outcome: Planned) -> tuple[np.ndarray, np.nd
 
 def joints(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Joint angles (deg) over time (s), one colour per planner."""
-    figure = _figure((10, 6))
+    figure = new_figure((10, 6))
     axes = figure.subplots(2, 1, sharex=True)
     for index, outcome in enumerate(outcomes):
         t, q, _, _ = _samples(outcome)
@@ -135,7 +113,7 @@ def joints(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
 
 def torques(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Actuator torques (N·m, the model with exact friction) over time (s)."""
-    figure = _figure((10, 6))
+    figure = new_figure((10, 6))
     axes = figure.subplots(2, 1, sharex=True)
     for index, outcome in enumerate(outcomes):
         t, q, qd, qdd = _samples(outcome)
@@ -156,7 +134,7 @@ def torques(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
 def tool_speed(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """The tool's speed on the skull (mm/s) against the distance cut so far (mm), with the
     limit and the landmarks' places along the contour."""
-    figure = _figure((10, 4.5))
+    figure = new_figure((10, 4.5))
     axis = figure.subplots()
     for index, outcome in enumerate(outcomes):
         distance, speed = _cut_progress(problem, outcome)
@@ -184,7 +162,7 @@ def cuts(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     contour (mm, log scale) against the place along the contour it is nearest to (mm),
     with the landmarks and the tolerance: cuts a tenth of a millimetre apart, one on the
     other at the left, stand apart there."""
-    figure = _figure((13, 7))
+    figure = new_figure((13, 7))
     top, off = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.3]})
     contour = problem.contour
     for index, outcome in enumerate(outcomes):
@@ -266,10 +244,10 @@ _HEADLINES: tuple[tuple[str, Callable[[Measured], float], bool], ...] = (
 
 def headline(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Bars of the headline figures, one panel per figure, one bar per planner."""
-    figure = _figure((13, 7))
+    figure = new_figure((13, 7))
     axes = figure.subplots(2, 3).ravel()
     names = [o.planner for o in outcomes]
-    colours = [_colour(k) for k in range(len(outcomes))]
+    colours = [planner_style(k)["color"] for k in range(len(outcomes))]
     limits = problem.limits
     drawn_limits = {
         "max_tool_speed_mm_s": limits.max_tool_speed,
@@ -279,7 +257,7 @@ def headline(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
         values = [value(o.report) for o in outcomes]  # type: ignore[arg-type]
         axis.bar(names, values, color=colours, log=log)
         axis.set_title(column(name).label, fontsize=10)
-        axis.set_ylabel(_axis_label(name), fontsize=8)
+        axis.set_ylabel(metric_label(name), fontsize=8)
         axis.tick_params(axis="x", labelrotation=45, labelsize=8)
         axis.grid(True, axis="y", alpha=0.3)
         if drawn_limits.get(name) is not None:

@@ -18,14 +18,17 @@ import numpy as np
 import pandas as pd
 
 from spm_opt.report.columns import column
+from spm_opt.report.planner_style import (
+    labelled_handles,
+    metric_label,
+    new_figure,
+    planner_style,
+)
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-_COLOURS = [f"C{k}" for k in range(10)]
-_LINES = ("-", "--", "-.", ":")
-_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
 _SUFFIXES = (
     ("_mm_s", "mm/s"),
     ("_rad_s2", "rad/s²"),
@@ -47,31 +50,6 @@ _COUNTS = ("flap_landmarks",)
 LOG_SPAN = 100.0
 """A metric is drawn on a log axis (a histogram's bins log-spaced) when its values are
 positive and span more than this factor."""
-
-
-def _figure(size: tuple[float, float]) -> Figure:
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=size, layout="constrained")
-
-
-def _colour(index: int) -> str:
-    return _COLOURS[index % len(_COLOURS)]
-
-
-def _style(index: int) -> dict[str, object]:
-    """The ``index``-th planner's colour, line style and marker."""
-    return {
-        "color": _colour(index),
-        "linestyle": _LINES[index % len(_LINES)],
-        "marker": _MARKERS[index % len(_MARKERS)],
-    }
-
-
-def _metric_label(metric: str) -> str:
-    """A metric's axis label with its unit ("(-)" for a ratio)."""
-    shown = column(metric)
-    return shown.label if shown.unit else f"{shown.label} (-)"
 
 
 def _parameter_label(parameter: str) -> str:
@@ -130,13 +108,13 @@ def against(
         The number of quantile bins, when the groups are bins.
     """
     metrics = [m for m in points.columns if m not in ("planner", parameter)]
-    figure = _figure((4.2 * min(4, len(metrics) + 1), 3.4 * math.ceil((len(metrics) + 1) / 4)))
+    figure = new_figure((4.2 * min(4, len(metrics) + 1), 3.4 * math.ceil((len(metrics) + 1) / 4)))
     axes = _panels(figure, len(metrics) + 1, 4)
     for index, planner in enumerate(planners):
         mine = medians[medians["planner"] == planner]
         if mine.empty:  # none of its tasks has the parameter
             continue
-        style = _style(index)
+        style = planner_style(index)
         dots = points[points["planner"] == planner]
         for axis, metric in zip(axes, metrics, strict=False):
             axis.scatter(dots[parameter], dots[metric], s=10, alpha=0.3, color=style["color"], lw=0)
@@ -144,7 +122,7 @@ def against(
         axes[-1].plot(mine["at"], 100 * mine["clean_rate"], **style, ms=4, label=planner)
         axes[-1].plot(mine["at"], 100 * mine["planned_rate"], ":", color=style["color"], lw=1)
     for axis, metric in zip(axes, metrics, strict=False):
-        axis.set_ylabel(_metric_label(metric))
+        axis.set_ylabel(metric_label(metric))
         if _log_spaced(points[metric].dropna().to_numpy()):
             axis.set_yscale("log")
     axes[-1].set_ylabel("tasks clean (marked), planned (dotted) (%)", fontsize=9)
@@ -194,7 +172,7 @@ def heatmap(
     low, high = _colour_range(cells["median"] if constant is None else mine["median"])
     columns, rows = labels
     grid = np.full((len(rows), len(columns)), np.nan)
-    figure = _figure((2.2 + 1.1 * len(columns), 1.8 + 0.8 * len(rows)))
+    figure = new_figure((2.2 + 1.1 * len(columns), 1.8 + 0.8 * len(rows)))
     axis = figure.subplots()
     for cell in mine.itertuples(index=False):
         grid[cell.y, cell.x] = cell.median
@@ -213,7 +191,7 @@ def heatmap(
         vmin=low,
         vmax=high,
     )
-    bar = figure.colorbar(image, ax=axis, label=_metric_label(metric))
+    bar = figure.colorbar(image, ax=axis, label=metric_label(metric))
     if constant is not None:
         bar.set_ticks([constant], labels=[f"{constant:.4g}"])
     axis.set_xticks(range(len(columns)), list(columns))
@@ -257,10 +235,10 @@ def flap_robustness(table: pd.DataFrame, flaps: int, name: str) -> Figure:
     """
     import matplotlib as mpl
 
-    figure = _figure((1.5 + 1.2 * len(table), 4.8))
+    figure = new_figure((1.5 + 1.2 * len(table), 4.8))
     axis = figure.subplots()
     at = np.arange(len(table))
-    colours = [_colour(k) for k in range(len(table))]
+    colours = [planner_style(k)["color"] for k in range(len(table))]
     for offset, share, count, alpha in (
         (-0.2, "planned_rate", "planned", 0.45),
         (0.2, "clean_rate", "clean", 1.0),
@@ -307,7 +285,7 @@ def flap_rates(
     name : str
         The sweep's name, for the title.
     """
-    figure = _figure((4.6 * min(4, len(rates)), 3.8 * math.ceil(len(rates) / 4) + 0.6))
+    figure = new_figure((4.6 * min(4, len(rates)), 3.8 * math.ceil(len(rates) / 4) + 0.6))
     axes = _panels(figure, len(rates), 4)
     for axis, (parameter, table) in zip(axes, rates.items(), strict=True):
         labels = list(dict.fromkeys(table["group"]))
@@ -320,10 +298,7 @@ def flap_rates(
         axis.set_xlabel(_parameter_label(parameter))
         axis.grid(True, alpha=0.3)
     figure.suptitle(f"{name}: robustness over {flaps} generated bone flaps, per parameter")
-    handles: dict[str, object] = {}
-    for axis in axes:
-        for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
-            handles.setdefault(label, handle)
+    handles = labelled_handles(axes)
     order = [*planners, *(label for label, _ in _OUTCOMES)]
     labels = sorted(handles, key=order.index)
     figure.legend([handles[k] for k in labels], labels, loc="outside lower center", ncol=6)
@@ -345,7 +320,7 @@ def _shares(axis: Axes, table: pd.DataFrame, planners: Sequence[str], at: dict) 
         if mine.empty:  # none of its tasks has the parameter
             continue
         x = [at[label] for label in mine["group"]]
-        style = _style(index)
+        style = planner_style(index)
         axis.plot(x, 100 * mine["clean_rate"], **style, ms=4, label=planner)
         axis.plot(x, 100 * mine["planned_rate"], ":", color=style["color"], lw=1)
     axis.set_ylim(-5, 105)
@@ -376,7 +351,7 @@ def histograms(points: pd.DataFrame, planners: Sequence[str], name: str) -> Figu
     every planner of the sweep, in the order of their colours.
     """
     metrics = [m for m in points.columns if m != "planner"]
-    figure = _figure((4.2 * min(4, len(metrics)), 3.4 * math.ceil(len(metrics) / 4) + 0.6))
+    figure = new_figure((4.2 * min(4, len(metrics)), 3.4 * math.ceil(len(metrics) / 4) + 0.6))
     axes = _panels(figure, len(metrics), 4)
     for axis, metric in zip(axes, metrics, strict=True):
         values = points[metric].dropna()
@@ -384,11 +359,19 @@ def histograms(points: pd.DataFrame, planners: Sequence[str], name: str) -> Figu
         for index, planner in enumerate(planners):
             mine = points.loc[points["planner"] == planner, metric].dropna()
             if len(mine):
-                style = {"color": _colour(index), "linestyle": _LINES[index % len(_LINES)]}
-                axis.hist(mine, edges, histtype="step", lw=1.5, **style, label=planner)
+                style = planner_style(index)
+                axis.hist(
+                    mine,
+                    edges,
+                    histtype="step",
+                    lw=1.5,
+                    color=style["color"],
+                    linestyle=style["linestyle"],
+                    label=planner,
+                )
         if _log_spaced(values.to_numpy()):
             axis.set_xscale("log")
-        axis.set_xlabel(_metric_label(metric))
+        axis.set_xlabel(metric_label(metric))
         axis.set_ylabel("planned tasks (count)", fontsize=8)
         axis.grid(True, alpha=0.3)
     figure.suptitle(f"{name}: key metrics over the generated bone flaps, per planner")
