@@ -130,6 +130,25 @@ def _parser() -> argparse.ArgumentParser:
         help="directory for the table and figures (made if missing)",
     )
 
+    review = commands.add_parser(
+        "review", help="a plan in 3-D on the skull with the robot: review.html and review.png"
+    )
+    review.add_argument("problem", type=Path, help="problem TOML file")
+    review.add_argument("plan", type=Path, help="trajectory CSV file (spm-opt plan --out)")
+    review.add_argument(
+        "--log",
+        type=Path,
+        default=None,
+        help="execution log CSV (spm-opt execute --log) whose measured cut is drawn too "
+        "(default: only the plan)",
+    )
+    review.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="directory for review.html and review.png (made if missing)",
+    )
+
     _execute_parser(commands)
     _emulate_parser(commands)
 
@@ -605,6 +624,29 @@ def _faults(name: str, report: Report) -> str:
     return f"the {name} cut: {' and '.join(parts)}" if parts else ""
 
 
+def _review(args: argparse.Namespace) -> None:
+    from spm_opt.files import write_atomically
+    from spm_opt.input_limits import read_execution_log
+    from spm_opt.problem import load_problem
+    from spm_opt.report.review import review_page
+    from spm_opt.report.review_png import review_png
+    from spm_opt.skull.surface import Skull
+    from spm_opt.trajectory import Trajectory
+
+    check_output_directory(args.out, "--out")
+    problem = load_problem(args.problem)
+    trajectory = Trajectory.from_csv(args.plan)
+    log = None if args.log is None else read_execution_log(args.log)[0]
+    skull = problem.skull if problem.skull is not None else Skull(surface=problem.surface)
+    files = {
+        args.out / "review.html": review_page(problem, skull, trajectory, log),
+        args.out / "review.png": review_png(problem, skull, trajectory, log),
+    }
+    write_atomically(files)
+    for path in files:
+        print(path)
+
+
 def _identify(args: argparse.Namespace) -> None:
     from spm_opt.files import write_atomically
     from spm_opt.identify import (
@@ -688,6 +730,7 @@ _COMMANDS = {
     "compare": _compare,
     "evaluate": _evaluate,
     "identify": _identify,
+    "review": _review,
     "execute": _execute,
     "emulate": _emulate,
     "sweep": _sweep,

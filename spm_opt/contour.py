@@ -1,25 +1,28 @@
-"""The planned cut on the skull: great-circle arcs through the landmarks.
+"""The planned cut on the skull: great-circle arcs through the landmarks' directions.
 
 A surgeon draws the cut through the landmarks A_i. Between consecutive landmarks it follows
-the great circle through their directions, and its radius (the skull's) changes linearly
-with the angle travelled, from |A_i| to |A_{i+1}|. The tool points at the isocenter, so the
-robot cuts where the platform's direction b = B / r_u meets the skull; the skull's radius
-in a direction is taken as that of the nearest contour point (by angle).
+the great circle through their directions; its points lie on the skull's outer surface
+(:mod:`spm_opt.skull`), at the radius ρ the surface has in each direction. The tool points
+at the isocenter, so the robot cuts where the platform's direction p = B / r_u meets the
+surface: the cut point ρ(p) p.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+from scipy.interpolate import CubicHermiteSpline
 
 from spm_opt.model import kinematics
+from spm_opt.skull.landmark_surface import LandmarkSurface
+from spm_opt.skull.surface import SkullSurface
 
-_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(16)
-_GAUSS_FRACTIONS = _GAUSS_NODES + 1
-"""The Gauss nodes as fractions of half the interval, from its start (0 to 2)."""
-NEWTON_STEPS = 8
-"""Newton steps of :meth:`Contour.point_at` (from the constant-radius guess)."""
+KNOTS_PER_RADIAN = 1024
+"""Knots of each arc's tables of the radius and the arc length, per radian of the arc (at
+least 32 an arc): about one every 0.07 mm on a skull of 70 mm."""
+_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(4)
 PRODUCT_ROWS = 16_384
 """Rows per matrix product in :func:`_components`: few enough that OpenBLAS keeps a product
 of three columns on one thread (starting threads costs more than it saves on so little
@@ -40,7 +43,7 @@ class Nearest:
     offset : ndarray (N,), rad
         Angle between the direction and the nearest contour point.
     radius : ndarray (N,), m
-        Skull radius at the nearest contour point.
+        The skull's radius at the nearest contour point.
     interior : ndarray (N,), bool
         True where the nearest point lies strictly inside its arc (not at a landmark).
     """
@@ -53,26 +56,31 @@ class Nearest:
 
 
 class Contour:
-    """Great-circle arcs between consecutive landmarks, closed back to the first if asked.
+    """Great-circle arcs between consecutive landmarks' directions, closed back to the first
+    if asked, on the skull's outer surface.
 
     Parameters
     ----------
     landmarks : ndarray, shape (n, 3), m
-        Points on the skull, in visiting order; each with z > 0, no two consecutive equal.
+        Points on the skull, in visiting order; each with z > 0, no two consecutive in the
+        same direction.
     closed : bool
         Whether the cut returns from the last landmark to the first.
+    surface : SkullSurface, optional
+        The skull's outer surface; by default the smooth surface through the landmarks.
     """
 
-    def __init__(self, landmarks: np.ndarray, closed: bool) -> None:
+    def __init__(
+        self, landmarks: np.ndarray, closed: bool, surface: SkullSurface | None = None
+    ) -> None:
         landmarks = np.asarray(landmarks, dtype=float)
+        self.surface = LandmarkSurface(landmarks) if surface is None else surface
         order = list(range(len(landmarks))) + ([0] if closed else [])
         starts, ends = landmarks[order[:-1]], landmarks[order[1:]]
         self.landmarks = landmarks
         self.closed = closed
-        self.start_radius = np.linalg.norm(starts, axis=1)
-        self.end_radius = np.linalg.norm(ends, axis=1)
-        self.start = starts / self.start_radius[:, None]
-        end = ends / self.end_radius[:, None]
+        self.start = starts / np.linalg.norm(starts, axis=1)[:, None]
+        end = ends / np.linalg.norm(ends, axis=1)[:, None]
         normal = np.cross(self.start, end)
         sine = np.linalg.norm(normal, axis=1)
         self.sweep = np.arctan2(sine, np.einsum("ij,ij->i", self.start, end))
@@ -81,24 +89,83 @@ class Contour:
         self.inplane = np.cross(self.normal, self.start)
         self.end = self._unit(np.arange(len(self.sweep)), self.sweep)
         """Unit direction at the end of each arc (its next landmark's, to rounding)."""
-        self.radius_slope = (self.end_radius - self.start_radius) / self.sweep
-        """dρ/dφ of each arc, m/rad."""
-        self.arc_lengths = self._length_to(np.arange(len(self.sweep)), self.sweep)
-        self.landmark_arc_lengths = np.concatenate([[0.0], np.cumsum(self.arc_lengths)])
+
+    @cached_property
+    def _splines(self) -> tuple[tuple[CubicHermiteSpline, ...], ...]:
+        """Per arc, its radius, arc length and angle splines (:meth:`_tables`), built when
+        first needed (the surface is ray-cast then)."""
+        return tuple(zip(*(self._tables(arc) for arc in range(len(self.sweep))), strict=True))
+
+    @property
+    def _radius_along(self) -> tuple[CubicHermiteSpline, ...]:
+        return self._splines[0]
+
+    @property
+    def _length_along(self) -> tuple[CubicHermiteSpline, ...]:
+        return self._splines[1]
+
+    @property
+    def _angle_at(self) -> tuple[CubicHermiteSpline, ...]:
+        return self._splines[2]
+
+    @cached_property
+    def arc_lengths(self) -> np.ndarray:
+        """Length of each arc, m."""
+        return np.array([float(table(table.x[-1])) for table in self._length_along])
+
+    @cached_property
+    def landmark_arc_lengths(self) -> np.ndarray:
         """Arc length at each landmark visit (the first again at the end if closed), m."""
+        return np.concatenate([[0.0], np.cumsum(self.arc_lengths)])
+
+    def _tables(
+        self, arc: int
+    ) -> tuple[CubicHermiteSpline, CubicHermiteSpline, CubicHermiteSpline]:
+        """The radius ρ(φ), the arc length s(φ) and its inverse φ(s) along ``arc``: cubic
+        Hermite splines through the surface's radius and its slope at the knots, and the
+        length ∫ sqrt(ρ² + ρ'²) dφ (4-point Gauss on each knot interval)."""
+        sweep = self.sweep[arc]
+        knots = np.linspace(0.0, sweep, max(32, int(np.ceil(KNOTS_PER_RADIAN * sweep))) + 1)
+        units = self._unit(np.full(len(knots), arc), knots)
+        radius, gradient = self.surface.radius_gradient(units)
+        tangents = (
+            -np.sin(knots)[:, None] * self.start[arc] + np.cos(knots)[:, None] * (self.inplane[arc])
+        )
+        radius_along = CubicHermiteSpline(knots, radius, np.einsum("ni,ni->n", gradient, tangents))
+        slope_along = radius_along.derivative()
+        width = np.diff(knots)
+        nodes = knots[:-1, None] + width[:, None] * (_GAUSS_NODES + 1) / 2
+        integrand = np.hypot(radius_along(nodes), slope_along(nodes))
+        lengths = np.concatenate([[0.0], np.cumsum(width / 2 * (integrand @ _GAUSS_WEIGHTS))])
+        rate = np.hypot(radius, slope_along(knots))
+        return (
+            radius_along,
+            CubicHermiteSpline(knots, lengths, rate),
+            CubicHermiteSpline(lengths, knots, 1.0 / rate),
+        )
 
     @property
     def length(self) -> float:
         """Total length of the cut, m."""
         return float(self.landmark_arc_lengths[-1])
 
+    def _per_arc(
+        self, tables: tuple[CubicHermiteSpline, ...], arc: np.ndarray, x: np.ndarray
+    ) -> np.ndarray:
+        """Each arc's spline of ``tables`` at its own points: ``tables[arc[k]](x[k])``."""
+        arc, x = np.broadcast_arrays(np.asarray(arc), np.asarray(x, dtype=float))
+        out = np.empty(x.shape)
+        for index in np.unique(arc):
+            rows = arc == index
+            out[rows] = tables[index](x[rows])
+        return out
+
     def _radius(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
-        return self.start_radius[arc] + self.radius_slope[arc] * angle
+        return self._per_arc(self._radius_along, arc, angle)
 
     def _length_to(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
-        """Arc length from the start of ``arc`` to ``angle``: ∫ sqrt(ρ² + ρ'²) dφ (Gauss)."""
-        arc, angle = np.broadcast_arrays(np.asarray(arc), np.asarray(angle, dtype=float))
-        return _gauss_length(self.start_radius[arc], self.radius_slope[arc], angle)
+        """Arc length, m, from the start of ``arc`` to ``angle`` along it."""
+        return self._per_arc(self._length_along, arc, angle)
 
     def point_at(self, s: np.ndarray) -> np.ndarray:
         """Contour points (N, 3), m, at arc lengths ``s`` (N,), m, from the first landmark."""
@@ -106,14 +173,9 @@ class Contour:
         arc = np.clip(
             np.searchsorted(self.landmark_arc_lengths, s, side="right") - 1, 0, len(self.sweep) - 1
         )
-        local = s - self.landmark_arc_lengths[arc]
-        start_radius, slope, sweep = self.start_radius[arc], self.radius_slope[arc], self.sweep[arc]
-        angle = local / np.hypot(start_radius, slope)
-        for _ in range(NEWTON_STEPS):  # on s(φ) = local; ds/dφ = sqrt(ρ² + ρ'²) > 0
-            rate = np.hypot(start_radius + slope * angle, slope)
-            step = (_gauss_length(start_radius, slope, angle) - local) / rate
-            angle = np.clip(angle - step, 0, sweep)
-        return self._unit(arc, angle) * (start_radius + slope * angle)[..., None]
+        local = np.clip(s - self.landmark_arc_lengths[arc], 0.0, self.arc_lengths[arc])
+        angle = np.clip(self._per_arc(self._angle_at, arc, local), 0.0, self.sweep[arc])
+        return self._unit(arc, angle) * self._radius(arc, angle)[..., None]
 
     def _unit(self, arc: np.ndarray, angle: np.ndarray) -> np.ndarray:
         return (
@@ -172,22 +234,23 @@ class Contour:
 
     def cut_points(self, directions: np.ndarray) -> np.ndarray:
         """Where the tool meets the skull along unit directions (N, 3): points (N, 3), m."""
-        return self.nearest(directions).radius[:, None] * np.asarray(directions, dtype=float)
+        directions = np.asarray(directions, dtype=float)
+        return self.surface.radius(directions)[:, None] * directions
 
     def deviation(self, directions: np.ndarray) -> np.ndarray:
         """Distance (N,), m, of the cut point in each direction (or of each cut point) from
-        the contour.
-
-        The chord 2 ρ sin(δ/2) between the cut point and the nearest contour point, with δ
-        the angle between them and ρ the skull radius there.
-        """
-        return self.chord(self.nearest(directions))
+        the contour, on the skull (see :meth:`distance`)."""
+        p = np.asarray(directions, dtype=float)
+        p = p / np.linalg.norm(p, axis=-1, keepdims=True)
+        return self.distance(self.nearest(p), self.surface.radius(p))
 
     @staticmethod
-    def chord(near: Nearest) -> np.ndarray:
-        """Distance (N,), m, from each nearest contour point to the cut point it is nearest
-        to: 2 ρ sin(δ/2) (see :meth:`deviation`)."""
-        return 2.0 * near.radius * np.sin(near.offset / 2.0)
+    def distance(near: Nearest, radius: np.ndarray) -> np.ndarray:
+        """Distance (N,), m, between each cut point, at ``radius`` (N,), m, along its
+        direction, and its nearest contour point (by angle δ, at the radius ρ_c there):
+        |ρ p − ρ_c c| = sqrt((ρ − ρ_c)² + 4 ρ ρ_c sin²(δ/2))."""
+        lateral = 2.0 * np.sqrt(radius * near.radius) * np.sin(near.offset / 2.0)
+        return np.hypot(radius - near.radius, lateral)
 
     def joint_tool_speed(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """Speed (N,), m/s, of the cut point for joint angles q (N, 2), rad, moving at
@@ -195,25 +258,24 @@ class Contour:
         q = np.asarray(q, dtype=float)
         return self.tool_speed(kinematics.forward_kinematics(q, 1.0), direction_rates(q, qd))
 
-    def tool_speed(
-        self, directions: np.ndarray, direction_rates: np.ndarray, near: Nearest | None = None
-    ) -> np.ndarray:
+    def tool_speed(self, directions: np.ndarray, direction_rates: np.ndarray) -> np.ndarray:
         """Speed (N,), m/s, of the cut point for unit directions p (N, 3) moving at ṗ (N, 3),
-        1/s; ``near``: the contour points nearest to p, when already found.
+        1/s.
 
-        The cut point is P = ρ p, so |Ṗ|² = ρ² |ṗ|² + ρ̇², with ρ̇ = ρ' φ̇ where the nearest
-        contour point moves along an arc (and 0 where it sits at a landmark).
+        The cut point is P = ρ(p) p on the skull's surface, so |Ṗ|² = ρ² |ṗ|² + ρ̇², with
+        ρ̇ = ∇ρ · ṗ (ṗ ⟂ p).
         """
-        p = np.asarray(directions, dtype=float)
-        p_dot = np.asarray(direction_rates, dtype=float)
-        near = self.nearest(p) if near is None else near
-        a, w = self.start[near.arc], self.inplane[near.arc]
-        pa, pw = np.einsum("nk,nk->n", p, a), np.einsum("nk,nk->n", p, w)
-        angle_rate = (
-            np.einsum("nk,nk->n", p_dot, w) * pa - pw * np.einsum("nk,nk->n", p_dot, a)
-        ) / (pa**2 + pw**2)
-        radius_rate = np.where(near.interior, self.radius_slope[near.arc] * angle_rate, 0.0)
-        return np.hypot(near.radius * np.linalg.norm(p_dot, axis=1), radius_rate)
+        radius, gradient = self.surface.radius_gradient(np.asarray(directions, dtype=float))
+        return surface_speed(radius, gradient, direction_rates)
+
+
+def surface_speed(radius: np.ndarray, gradient: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """Speed (N,), m/s, of the point ρ(p) p on a surface of radius ρ (N,), m, and gradient
+    ∇ρ (N, 3), m/rad, at directions p moving at ṗ = ``rates`` (N, 3), 1/s:
+    sqrt(ρ² |ṗ|² + (∇ρ · ṗ)²)."""
+    rates = np.asarray(rates, dtype=float)
+    radius_rate = np.einsum("nk,nk->n", gradient, rates)
+    return np.hypot(radius * np.linalg.norm(rates, axis=1), radius_rate)
 
 
 def direction_rates(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
@@ -222,17 +284,6 @@ def direction_rates(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     jacobian = kinematics.platform_jacobian(q, 1.0)
     return np.einsum("nij,nj->ni", jacobian, np.broadcast_to(qd, q.shape))
-
-
-def _gauss_length(start_radius: np.ndarray, slope: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """∫₀^angle sqrt(ρ² + ρ'²) dφ, m, with ρ = start_radius + slope φ, element by element
-    (16-point Gauss–Legendre; radii in m, slopes in m/rad, angles in rad)."""
-    half = angle / 2
-    radius = half[..., None] * _GAUSS_FRACTIONS
-    radius *= slope[..., None]
-    radius += start_radius[..., None]
-    integrand = np.hypot(radius, slope[..., None], out=radius)
-    return half * (integrand @ _GAUSS_WEIGHTS)
 
 
 def _components(p: np.ndarray, axes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -29,6 +29,8 @@ OPTIONAL: dict[str, tuple[str, str]] = {
     "dynamixel_sdk": ("dynamixel-sdk", "hardware"),
     "serial": ("pyserial", "hardware"),
     "mujoco": ("mujoco", "verify"),
+    "trimesh": ("trimesh", "skull"),
+    "plotly": ("plotly", "skull"),
 }
 """Every optional module: its package and the extra of pyproject.toml that installs it."""
 

@@ -33,13 +33,14 @@ from typing import Any
 import numpy as np
 
 from spm_opt.bounds import duration_lower_bound
-from spm_opt.contour import direction_rates
+from spm_opt.contour import direction_rates, surface_speed
 from spm_opt.hold_room import hold_checks
 from spm_opt.limits import ROBOT, RULES, contour_tube, path_tolerance
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
 from spm_opt.report.markdown import markdown_table
+from spm_opt.skull.depth import DepthProfile, depth_profile
 from spm_opt.trajectory import Trajectory
 
 DEFAULT_RATE_HZ = 1000.0
@@ -111,6 +112,9 @@ class Report:
     effort_n2m2s: float
     violations: list[Violation] = field(default_factory=list)
     contour_judged: bool = True
+    max_tool_incidence_deg: float | None = None
+    max_depth_speed_mm_s: float | None = None
+    max_depth_acceleration_mm_s2: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON; violations as dicts."""
@@ -337,8 +341,10 @@ def judge(
     torque, current = motion.torque, motion.current
     directions = kinematics.forward_kinematics(q, 1.0)
     near = contour.nearest(directions)
-    deviation = contour.chord(near)
-    tool_speed = contour.tool_speed(directions, direction_rates(q, qd), near)
+    radius, gradient = contour.surface.radius_gradient(directions)
+    deviation = contour.distance(near, radius)
+    tool_speed = surface_speed(radius, gradient, direction_rates(q, qd))
+    incidence = np.degrees(np.arctan(np.linalg.norm(gradient, axis=1) / radius))
     margins = kinematics.singularity_margins(q)
     torque_limit = problem.max_joint_torque
     peak_torque = _peaks(torque)
@@ -396,6 +402,16 @@ def judge(
         )
     if tube is not None:
         checks.upper("contour deviation", "contour deviation", deviation / MM, tube / MM)
+    if limits.max_tool_incidence is not None:
+        limit = np.degrees(limits.max_tool_incidence)
+        checks.upper("tool incidence", "tool incidence", incidence, limit)
+    depth = _depth(problem, t, q, qd)
+    for rule, values, limit in (
+        ("depth speed", depth.speed, limits.max_depth_speed),
+        ("depth acceleration", depth.acceleration, limits.max_depth_acceleration),
+    ):
+        if limit is not None:
+            checks.upper(rule, rule, np.abs(values) / MM, limit / MM)
     for visit in landmark_errors:
         checks.upper(
             "landmark visit",
@@ -438,6 +454,9 @@ def judge(
         peak_current_a=peak_current.tolist(),
         current_margin=(1.0 - peak_current / robot.actuator.continuous_current_a).tolist(),
         energy_j=float(np.trapezoid(np.sum(np.abs(torque * qd), axis=1), t)),
+        max_tool_incidence_deg=float(np.max(incidence)),
+        max_depth_speed_mm_s=_largest(depth.speed, MM),
+        max_depth_acceleration_mm_s2=_largest(depth.acceleration, MM),
         effort_n2m2s=float(_time_mean(np.sum(torque**2, axis=1), t) * (t[-1] - t[0])),
         violations=violations,
         contour_judged=contour_judged,
@@ -551,6 +570,20 @@ def _landmark_errors(
             }
         )
     return errors
+
+
+def _largest(values: np.ndarray, unit: float) -> float | None:
+    """The largest magnitude of ``values`` in ``unit``s, None for none."""
+    return float(np.max(np.abs(values)) / unit) if len(values) else None
+
+
+def _depth(problem: Problem, t: np.ndarray, q: np.ndarray, qd: np.ndarray) -> DepthProfile:
+    """The tool's depth setpoint along the motion (empty without an inner mesh)."""
+    inner = problem.inner_radius
+    if inner is None:
+        empty = np.zeros(0)
+        return DepthProfile(empty, empty, empty)
+    return depth_profile(inner, problem.skull.depth_margin, t, q, qd)
 
 
 def _between(

@@ -17,6 +17,8 @@ The evaluator's tolerance, one table (:data:`RULES`):
 | landmark visit | mm | 0.5 % | cut |
 | coverage | mm | 0.5 % | cut |
 | backtracking | mm | 0.5 % | cut |
+| tool incidence | deg | 0.5 % | cut |
+| depth speed, depth acceleration | mm/s, mm/s² | 0.5 % | cut |
 | hold acceleration, hold jerk | rad/s², rad/s³ | 0.5 % | cut |
 | joint range | deg | none (hard) | robot |
 | singularity margin | — | none (hard) | robot |
@@ -106,6 +108,9 @@ RULES: dict[str, Rule] = {
         Rule("landmark visit", "mm", RELATIVE_TOLERANCE, CUT),
         Rule("coverage", "mm", RELATIVE_TOLERANCE, CUT),
         Rule("backtracking", "mm", RELATIVE_TOLERANCE, CUT),
+        Rule("tool incidence", "deg", RELATIVE_TOLERANCE, CUT),
+        Rule("depth speed", "mm/s", RELATIVE_TOLERANCE, CUT),
+        Rule("depth acceleration", "mm/s^2", RELATIVE_TOLERANCE, CUT),
         Rule("hold acceleration", "rad/s^2", RELATIVE_TOLERANCE, CUT),
         Rule("hold jerk", "rad/s^3", RELATIVE_TOLERANCE, CUT),
     )

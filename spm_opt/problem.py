@@ -28,6 +28,11 @@ from spm_opt.input_limits import MAX_LANDMARKS, excerpt
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import RPM
 from spm_opt.model.params import MM, Robot, load_robot
+from spm_opt.skull.arc_fit import ArcRadiusFit, fit_arc_radius
+from spm_opt.skull.landmark_surface import LandmarkSurface
+from spm_opt.skull.problem_keys import markup_landmarks, read_skull_table, skull_on_mesh
+from spm_opt.skull.smooth_radius import SmoothRadius
+from spm_opt.skull.surface import Skull, SkullSurface
 
 _SAME_DIRECTION_RAD = 1e-6
 MIN_SEGMENT_DURATION_S = 0.01
@@ -47,6 +52,9 @@ cost of shorter bounds is measured)."""
 MAX_HOLD_WITHIN_S = 60.0
 """Longest hold bound accepted, s: a stop that takes longer is no hold."""
 
+INNER_REACH_MARGIN = 0.05
+"""How far past the landmark farthest from the flap's mean direction the inner surface's
+smooth radius reaches, rad."""
 MIN_LANDMARK_RADIUS = 0.02
 """Smallest distance of a landmark on the skull from the isocenter, m (catches metres
 written where millimetres are asked for)."""
@@ -76,6 +84,13 @@ class Limits:
         the request, from any point of the plan at full feed; the planners keep the
         acceleration and jerk it needs (:mod:`spm_opt.hold_room`). None: no bound, no room
         kept.
+    max_tool_incidence : float or None, rad
+        Largest angle between the tool's axis and the skull's outer normal where it cuts.
+    min_bone_thickness : float or None, m
+        Thinnest bone along the tool's axis a flap may cross (needs the skull's inner mesh).
+    max_depth_speed : float or None, m/s
+    max_depth_acceleration : float or None, m/s²
+        The tool module's limits on its depth setpoint (needs the skull's inner mesh).
     """
 
     max_joint_speed: float
@@ -86,6 +101,10 @@ class Limits:
     max_joint_torque: float | None = None
     execution_reserve: float = 0.0
     hold_within_s: float | None = DEFAULT_HOLD_WITHIN_S
+    max_tool_incidence: float | None = None
+    min_bone_thickness: float | None = None
+    max_depth_speed: float | None = None
+    max_depth_acceleration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -108,6 +127,9 @@ class Problem:
         The problem file's ``[planner.NAME]`` tables, read by each planner.
     source : Path or None
         The problem file, when loaded from one; ``source_sha256`` is its hash.
+    skull : Skull or None
+        The skull from imaging (its meshes, registration); None: the smooth surface through
+        the landmarks stands for it.
     """
 
     name: str
@@ -121,6 +143,7 @@ class Problem:
     planner_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: Path | None = None
     source_sha256: str | None = None
+    skull: Skull | None = None
 
     def __post_init__(self) -> None:
         landmarks = np.asarray(self.landmarks, dtype=float)
@@ -185,6 +208,28 @@ class Problem:
                     "reaches only z > 0"
                 )
         self.robot.check_reachable(self.platform_points, list(names))
+        self._check_skull()
+
+    def _check_skull(self) -> None:
+        """A skull from imaging: every direction of the cut meets it once, over bone thick
+        enough (:mod:`spm_opt.skull.cut_checks`)."""
+        skull, limits, thinnest = self.skull, self.limits, self.limits.min_bone_thickness
+        for key, value in (
+            ("min_bone_thickness_mm", thinnest),
+            ("max_depth_speed_mm_s", limits.max_depth_speed),
+            ("max_depth_acceleration_mm_s2", limits.max_depth_acceleration),
+        ):
+            if value is not None and (skull is None or skull.inner_mesh is None):
+                raise InputError(
+                    f"limits.{key}: expected a [skull] table with an inner_mesh (the bone "
+                    "is measured between the two surfaces)"
+                )
+        if skull is None or skull.outer_mesh is None:
+            return
+        from spm_opt.skull.cut_checks import check_cut
+
+        tube = self.limits.contour_tolerance
+        check_cut(skull.surface, self.contour, self.visit_names, tube, thinnest)
 
     @property
     def max_joint_torque(self) -> float:
@@ -209,18 +254,31 @@ class Problem:
             "limits": dataclasses.asdict(self.limits),
             "robot": robot,
         }
+        if self.skull is not None:
+            what["skull"] = self.skull.fingerprint
         text = json.dumps(what, sort_keys=True, default=json_default)
         return hashlib.sha256(text.encode()).hexdigest()
 
     def record(self) -> dict[str, Any]:
         """What a plan's metadata records of the problem it was made for: its name, its
-        file and the file's SHA-256, and its :attr:`fingerprint`."""
-        return {
+        file and the file's SHA-256, its :attr:`fingerprint`, and of a skull from imaging
+        the fiducial registration error and how far each landmark moved onto the mesh."""
+        record: dict[str, Any] = {
             "name": self.name,
             "file": None if self.source is None else str(self.source),
             "sha256": self.source_sha256,
             "fingerprint": self.fingerprint,
         }
+        skull = self.skull
+        if skull is not None:
+            record["skull"] = {
+                "mesh": skull.outer_mesh is not None,
+                "registration_rms_mm": skull.registration_rms_mm,
+                "landmark_shifts_mm": None
+                if skull.landmark_shifts_mm is None
+                else dict(zip(self.landmark_names, skull.landmark_shifts_mm.tolist(), strict=True)),
+            }
+        return record
 
     @property
     def visit_order(self) -> list[int]:
@@ -253,9 +311,47 @@ class Problem:
         return np.concatenate([[0.0], np.cumsum(self.segment_durations)])
 
     @cached_property
+    def surface(self) -> SkullSurface:
+        """The skull's outer surface: the mesh's, or the smooth surface through the
+        landmarks."""
+        return LandmarkSurface(self.landmarks) if self.skull is None else self.skull.surface
+
+    @cached_property
     def contour(self) -> Contour:
-        """The planned cut through the landmarks."""
-        return Contour(self.landmarks, self.closed)
+        """The planned cut through the landmarks, on the skull's surface."""
+        return Contour(self.landmarks, self.closed, self.surface)
+
+    @cached_property
+    def inner_radius(self) -> SmoothRadius | None:
+        """The skull's inner surface over the flap, smooth (for the tool's depth), or None
+        without an inner mesh."""
+        skull = self.skull
+        if skull is None or skull.inner_mesh is None:
+            return None
+        directions = self.landmarks / np.linalg.norm(self.landmarks, axis=1, keepdims=True)
+        centre = directions.mean(axis=0)
+        centre /= np.linalg.norm(centre)
+        reach = float(np.max(np.arccos(np.clip(directions @ centre, -1.0, 1.0))))
+        return SmoothRadius(skull.surface.inner_radius, centre, reach + INNER_REACH_MARGIN)
+
+    @cached_property
+    def arc_radius_fits(self) -> tuple[ArcRadiusFit, ...]:
+        """The skull's radius near each arc of the contour as a smooth polynomial (for the
+        optimal-control planners), reaching four tubes' widths off each arc."""
+        contour, tube = self.contour, self.limits.contour_tolerance
+        radius = float(np.min(np.linalg.norm(self.landmarks, axis=1)))
+        across = np.inf if tube is None else 4 * tube / radius
+        return tuple(
+            fit_arc_radius(
+                self.surface,
+                contour.start[i],
+                contour.inplane[i],
+                contour.normal[i],
+                float(contour.sweep[i]),
+                across,
+            )
+            for i in range(len(contour.sweep))
+        )
 
     @cached_property
     def segment_lower_bounds(self) -> np.ndarray:
@@ -302,11 +398,28 @@ def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -
     durations = root.vector(
         "segment_durations_s", minimum=MIN_SEGMENT_DURATION_S, maximum=MAX_SEGMENT_DURATION_S
     )
+    skull_keys = read_skull_table(root.table("skull", required=False), path.parent)
+    landmarks_file = root.string("landmarks_file", default="")
     names, points = [], []
-    for landmark in root.tables("landmarks"):
-        names.append(landmark.string("name"))
-        points.append(landmark.vector("position_mm", length=3, minimum=-1e3, maximum=1e3) * MM)
-        landmark.finish()
+    if landmarks_file:
+        if root.has("landmarks"):
+            raise root.error(
+                "landmarks_file", landmarks_file, "expected either it or [[landmarks]], not both"
+            )
+        marked = markup_landmarks(path.parent / landmarks_file, skull_keys, "landmarks_file")
+        names, points, closed = list(marked[0]), marked[1], closed or marked[2]
+    else:
+        for landmark in root.tables("landmarks"):
+            names.append(landmark.string("name"))
+            points.append(landmark.vector("position_mm", length=3, minimum=-1e3, maximum=1e3) * MM)
+            landmark.finish()
+    points = np.array(points)
+    skull = None
+    if skull_keys is not None:
+        try:
+            skull, points = skull_on_mesh(skull_keys, tuple(names), points)
+        except InputError as error:
+            raise type(error)(f"{path}: {error}") from None
     limits_table = root.table("limits", required=False)
     limits = _limits(limits_table, robot)
     planners = root.table("planner", required=False)
@@ -322,13 +435,14 @@ def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -
         description=description,
         robot=robot,
         landmark_names=tuple(names),
-        landmarks=np.array(points),
+        landmarks=points,
         closed=closed,
         segment_durations=durations,
         limits=limits,
         planner_options=options,
         source=path,
         source_sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+        skull=skull,
     )
 
 
@@ -338,6 +452,16 @@ def _in_file(path: Path, **fields: Any) -> Problem:
         return Problem(**fields)
     except InputError as error:
         raise type(error)(f"{path}: {error}") from None
+
+
+def _degrees(value: float | None) -> float | None:
+    """A file's angle in degrees, or None, in rad."""
+    return None if value is None else math.radians(value)
+
+
+def _millimetres_or_none(value: float | None) -> float | None:
+    """A file's length in mm, or None, in m."""
+    return None if value is None else value * MM
 
 
 def _millimetres(point: np.ndarray) -> str:
@@ -391,6 +515,10 @@ def _limits(table: Table, robot: Robot) -> Limits:
         contour_tolerance=None if tolerance is None else tolerance * MM,
         max_joint_torque=actuator_torque if torque is None else torque,
         execution_reserve=reserve * MM,
+        max_tool_incidence=_degrees(
+            table.number("max_tool_incidence_deg", **positive, maximum=90.0)
+        ),
+        min_bone_thickness=_millimetres_or_none(table.number("min_bone_thickness_mm", **positive)),
         hold_within_s=table.number(
             "hold_within_s",
             minimum=0.0,

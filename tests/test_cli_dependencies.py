@@ -18,6 +18,7 @@ import spm_opt as so
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
 HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
+SKULL_PROBLEM = ROOT / "problems" / "skull_flap.toml"
 
 _WITHOUT = (
     "import sys; sys.modules[sys.argv.pop(1)] = None; "
@@ -59,6 +60,10 @@ def _argv(command: str, out: Path, sweep_spec: Path, hardware_csv: Path) -> list
         return ["sweep", str(sweep_spec), "--out", str(out), "--scheduler", "local"]
     if command == "reproduce":
         return ["reproduce", "--problem", str(PAPER_PROBLEM), "--out", str(out)]
+    if command == "plan-skull":
+        return ["plan", str(SKULL_PROBLEM), "--planner", "cubic", "--out", str(out / "p.csv")]
+    if command == "review":
+        return ["review", str(HARDWARE_PROBLEM), str(hardware_csv), "--out", str(out)]
     assert command == "execute-dynamixel"
     return [
         "execute",
@@ -83,6 +88,8 @@ def _argv(command: str, out: Path, sweep_spec: Path, hardware_csv: Path) -> list
         ("dynamixel_sdk", "dynamixel-sdk", "hardware", "execute-dynamixel"),
         ("serial", "pyserial", "hardware", "execute-dynamixel"),
         ("mujoco", "mujoco", "verify", "reproduce"),
+        ("trimesh", "trimesh", "skull", "plan-skull"),
+        ("plotly", "plotly", "skull", "review"),
     ],
 )
 def test_a_missing_optional_package_names_its_extra(

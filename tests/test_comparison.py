@@ -81,7 +81,7 @@ def test_command_writes_the_table_the_summary_and_the_figures(tmp_path, failing_
         "A1 → A2 → A3 → A4 → A1",
         "tool speed on the skull: 3 mm/s",
         "contour tolerance: 0.1 mm",
-        "37.53 s",
+        "37.52 s",
     )
     assert all(text in above_the_table for text in stated)
     assert f"**{failing_planner}** failed: PlanningError" in summary

@@ -49,7 +49,7 @@ def direction(q: np.ndarray) -> np.ndarray:
 
 def dense_contour(problem: so.Problem, per_arc: int = 40_000) -> np.ndarray:
     """The planned contour as points (M, 3), m: each arc the great circle between its
-    landmarks (slerp), the skull's radius linear in the angle along it."""
+    landmarks (slerp), at the skull's radius in each direction (the problem's surface)."""
     landmarks = problem.landmarks[problem.visit_order]
     points = []
     for a, b in zip(landmarks[:-1], landmarks[1:], strict=True):
@@ -57,17 +57,18 @@ def dense_contour(problem: so.Problem, per_arc: int = 40_000) -> np.ndarray:
         sweep = np.arccos(np.clip(ua @ ub, -1.0, 1.0))
         phi = np.linspace(0.0, sweep, per_arc)[:, None]
         unit = (np.sin(sweep - phi) * ua + np.sin(phi) * ub) / np.sin(sweep)
-        radius = np.linalg.norm(a) + (np.linalg.norm(b) - np.linalg.norm(a)) * phi / sweep
-        points.append(radius * unit)
+        points.append(problem.surface.radius(unit)[:, None] * unit)
     return np.vstack(points)
 
 
-def deviation_from_polyline(q: np.ndarray, contour: np.ndarray) -> np.ndarray:
-    """Distance (N,), m, of the cut at joint angles q from the dense contour: the tool's
-    direction at the radius of the nearest contour point, to that point."""
+def deviation_from_polyline(
+    problem: so.Problem, q: np.ndarray, contour: np.ndarray
+) -> np.ndarray:
+    """Distance (N,), m, of the cut at joint angles q from the dense contour: the cut point
+    on the skull in the tool's direction, to the contour point nearest it by angle."""
     unit_contour = contour / np.linalg.norm(contour, axis=1, keepdims=True)
     _, nearest = cKDTree(unit_contour).query(direction(q))
-    cut = np.linalg.norm(contour[nearest], axis=1)[:, None] * direction(q)
+    cut = problem.surface.radius(direction(q))[:, None] * direction(q)
     return np.linalg.norm(cut - contour[nearest], axis=1)
 
 
@@ -173,7 +174,7 @@ def test_the_flap_displaced_matches_a_dense_polyline(hardware_toppra, offset_deg
     report = evaluate_log(
         problem, write_log(tmp_path / "run.csv", problem, t, measured, q)
     ).measured
-    expected = deviation_from_polyline(measured, dense_contour(problem))
+    expected = deviation_from_polyline(problem, measured, dense_contour(problem))
     assert report.max_contour_deviation_mm == pytest.approx(np.max(expected) / MM, abs=1e-4)
     assert report.rms_contour_deviation_mm == pytest.approx(
         np.sqrt(np.trapezoid(expected**2, t) / (t[-1] - t[0])) / MM, abs=1e-4
@@ -398,7 +399,7 @@ def test_a_joint_displaced_mid_run_shows_a_contour_violation_then(
     assert 0.9 <= violation.time_s <= 1.2
     rows = table[table.index >= table.index[table["phase"] == "plan"][0]]
     q = rows[["position_theta1_rad", "position_theta2_rad"]].to_numpy()
-    distance = deviation_from_polyline(q, dense_contour(problem))
+    distance = deviation_from_polyline(problem, q, dense_contour(problem))
     assert violation.time_s == rows["time_s"].iloc[int(np.argmax(distance))]
     assert violation.worst == pytest.approx(np.max(distance) / MM, abs=1e-4)
     plan_rows = table[table["phase"] == "plan"]

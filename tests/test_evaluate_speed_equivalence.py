@@ -33,13 +33,25 @@ def uneven_loop() -> Contour:
     return Contour(radii[:, None] * points / np.linalg.norm(points, axis=1)[:, None], True)
 
 
-def arc_length_by_quadrature(contour: Contour, arc: int, angle: float) -> float:
-    """∫₀^angle sqrt(ρ² + ρ'²) dφ, m, by adaptive quadrature, ρ linear in φ along the arc."""
+def radius_along(contour: Contour, arc: int, angle: float) -> float:
+    """The skull's radius, m, at ``angle`` along ``arc``: the surface's, in that direction."""
     start, end = contour.landmarks[arc], contour.landmarks[(arc + 1) % len(contour.landmarks)]
-    first, last = np.linalg.norm(start), np.linalg.norm(end)
-    sweep = math.atan2(np.linalg.norm(np.cross(start, end)), float(start @ end))
-    slope = (last - first) / sweep
-    value, _ = quad(lambda phi: math.hypot(first + slope * phi, slope), 0.0, angle, epsabs=0)
+    a = start / np.linalg.norm(start)
+    w = end / np.linalg.norm(end) - (end / np.linalg.norm(end) @ a) * a
+    w /= np.linalg.norm(w)
+    return float(contour.surface.radius((math.cos(angle) * a + math.sin(angle) * w)[None])[0])
+
+
+def arc_length_by_quadrature(contour: Contour, arc: int, angle: float) -> float:
+    """∫₀^angle sqrt(ρ² + ρ'²) dφ, m, by adaptive quadrature of the surface's radius along
+    the arc, ρ' by central differences of it."""
+    step = 1e-5
+
+    def integrand(phi: float) -> float:
+        slope = (radius_along(contour, arc, phi + step) - radius_along(contour, arc, phi - step))
+        return math.hypot(radius_along(contour, arc, phi), slope / (2 * step))
+
+    value, _ = quad(integrand, 0.0, angle, epsabs=0, epsrel=1e-12)
     return value
 
 
@@ -57,19 +69,17 @@ def point_by_scalar_search(contour: Contour, s: float) -> np.ndarray:
         cumulative += length
     local = min(max(s - cumulative, 0.0), length)
     angle = brentq(lambda phi: arc_length_by_quadrature(contour, arc, phi) - local, 0, sweep)
-    first, last = np.linalg.norm(start), np.linalg.norm(end)
-    a = start / first
-    w = end / last - (end / last @ a) * a
+    a = start / np.linalg.norm(start)
+    w = end / np.linalg.norm(end) - (end / np.linalg.norm(end) @ a) * a
     w /= np.linalg.norm(w)
-    radius = first + (last - first) * angle / sweep
-    return radius * (math.cos(angle) * a + math.sin(angle) * w)
+    return radius_along(contour, arc, angle) * (math.cos(angle) * a + math.sin(angle) * w)
 
 
 def test_arc_lengths_match_quadrature():
     contour = uneven_loop()
     for arc, sweep in enumerate(contour.sweep):
         expected = arc_length_by_quadrature(contour, arc, sweep)
-        assert contour.arc_lengths[arc] == pytest.approx(expected, rel=1e-13)
+        assert contour.arc_lengths[arc] == pytest.approx(expected, rel=1e-9)
 
 
 def test_arc_length_of_nearest_points_matches_quadrature():
@@ -81,7 +91,7 @@ def test_arc_length_of_nearest_points_matches_quadrature():
     for k in range(0, 200, 7):
         arc, angle = int(near.arc[k]), float(near.angle[k])
         expected = contour.landmark_arc_lengths[arc] + arc_length_by_quadrature(contour, arc, angle)
-        assert lengths[k] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+        assert lengths[k] == pytest.approx(expected, rel=1e-9, abs=1e-15)
 
 
 def test_point_at_matches_a_scalar_search_along_the_arcs():
@@ -90,7 +100,7 @@ def test_point_at_matches_a_scalar_search_along_the_arcs():
     s = np.concatenate([s, contour.landmark_arc_lengths, [contour.length]])
     points = contour.point_at(s)
     for k, value in enumerate(s):
-        np.testing.assert_allclose(points[k], point_by_scalar_search(contour, value), atol=1e-13)
+        np.testing.assert_allclose(points[k], point_by_scalar_search(contour, value), atol=1e-11)
 
 
 def nearest_by_scalar_search(contour: Contour, direction: np.ndarray) -> tuple[int, float, float]:
@@ -141,17 +151,20 @@ def test_nearest_matches_a_scalar_search_over_the_arcs():
         )
 
 
-def test_tool_speed_with_known_nearest_points_is_the_same():
+def test_tool_speed_matches_finite_differences_of_the_cut_points():
+    """The cut point ρ(p) p moved along q + q̇ t: its speed by central differences in t."""
     contour = uneven_loop()
     rng = np.random.default_rng(6)
     q = rng.uniform(-0.3, 0.3, (300, 2))
     qd = rng.normal(0.0, 0.05, (300, 2))
-    directions = kinematics.forward_kinematics(q, 1.0)
-    rates = direction_rates(q, qd)
-    near = contour.nearest(directions)
-    np.testing.assert_array_equal(
-        contour.tool_speed(directions, rates, near), contour.joint_tool_speed(q, qd)
-    )
+    step = 1e-4  # s
+
+    def cut(at: np.ndarray) -> np.ndarray:
+        directions = kinematics.forward_kinematics(at, 1.0)
+        return contour.surface.radius(directions)[:, None] * directions
+
+    by_differences = np.linalg.norm(cut(q + step * qd) - cut(q - step * qd), axis=1) / (2 * step)
+    np.testing.assert_allclose(contour.joint_tool_speed(q, qd), by_differences, rtol=1e-6)
 
 
 def test_direction_rates_match_finite_differences():

@@ -51,6 +51,10 @@ FIGURE_WRITERS = {
         "test_verify_hardware.py",
         "test_every_file_is_written_and_each_figure_is_a_real_png",
     ),
+    "spm_opt/report/review_png.py": (
+        "test_review.py",
+        "test_the_png_is_a_picture_of_sensible_size",
+    ),
     "spm_opt/cli.py": (
         "test_figures.py",
         "test_the_identification_figure_is_over_time_with_a_title",

@@ -114,10 +114,14 @@ def test_an_acceptable_level_stop_that_cannot_be_made_strict_is_an_error(
 
 
 def test_limits_exceeded_between_constraint_points_are_solved_again(paper_problem):
-    """Minimum jerk on the coarse grid (3 checks per interval) bulges past the tube
-    between the checks (0.107 mm once passed as clean); the planner re-solves with a
-    tighter bound until the evaluator finds nothing."""
-    plan = so.plan(paper_problem, "ocp-min-jerk")
+    """Minimum jerk with one check point per interval bulges past a limit between the
+    checks (at first three times, with the smooth surface through the landmarks); the
+    planner re-solves with checks moved and bounds tightened until the evaluator finds
+    nothing."""
+    problem = dataclasses.replace(
+        paper_problem, planner_options={"ocp-min-jerk": {"checks_per_interval": 1}}
+    )
+    plan = so.plan(problem, "ocp-min-jerk")
     statistics = plan.metadata["statistics"]
     assert statistics["refinements"] >= 1
     report = so.evaluate(paper_problem, plan)
@@ -298,7 +302,9 @@ def test_flaps_that_once_failed_are_clean(sweep, planner, flap):
     problem = random_flap(sweep, planner, flap)
     report = so.evaluate(problem, so.plan(problem, planner))
     assert report.violations == []
-    assert report.max_backtrack_mm <= 1e-6
+    # against 0.22 and 0.30 mm once: 1.24e-6 mm on flap 10 since the skull is the smooth
+    # surface through the flap's landmarks (their radii rounded to 0.01 mm)
+    assert report.max_backtrack_mm <= 1e-5
 
 
 def test_the_nlp_torque_is_the_actuators_joint_side_torque_with_drive_friction():

@@ -114,6 +114,39 @@ NOTES = {
     "tolerance if less; less than the tolerance; only with a tolerance.",
     ("problem", "limits.hold_within_s"): "A feed hold rests on the path within this time; "
     "the planners keep the room it needs.",
+    ("problem", "limits.max_tool_incidence_deg"): "Largest angle between the tool's axis and "
+    "the skull's outer normal where it cuts (a craniotome cuts badly into oblique bone); "
+    "judged by the evaluator. Absent: not limited.",
+    ("problem", "limits.min_bone_thickness_mm"): "Thinnest bone along the tool's axis the cut "
+    "may cross; a thinner stretch refuses the problem at loading. Needs skull.inner_mesh.",
+    ("problem", "limits.max_depth_speed_mm_s"): "The tool module's speed limit on its depth "
+    "setpoint; judged by the evaluator. Needs skull.inner_mesh.",
+    ("problem", "limits.max_depth_acceleration_mm_s2"): "The tool module's acceleration limit "
+    "on its depth setpoint; judged by the evaluator. Needs skull.inner_mesh.",
+    ("problem", "landmarks_file"): "Instead of [[landmarks]]: a 3D Slicer markups file "
+    "(.mrk.json: a Fiducial list, Curve or ClosedCurve, in LPS or RAS, mm or um), relative to "
+    "this file, read in its order; a ClosedCurve makes the cut closed. Needs [skull]'s "
+    "transform.",
+    ("problem", "skull"): "The patient's skull from imaging: meshes, their frame and the "
+    "transform into the robot's frame.",
+    ("problem", "skull.outer_mesh"): "The skull's outer surface: any mesh trimesh reads (STL, "
+    "PLY, OBJ, OFF), in mm, in `frame`, relative to this file. The tool cuts where its axis "
+    "meets it; landmarks are moved along their directions onto it.",
+    ("problem", "skull.inner_mesh"): "The skull's inner surface, like outer_mesh: the bone's "
+    "thickness and the tool's depth setpoint.",
+    ("problem", "skull.frame"): "The meshes' (and fiducials') frame: RAS or LPS; a mesh whose "
+    "header says SPACE=... must agree.",
+    ("problem", "skull.image_to_robot"): "4×4 rigid transform from the image's RAS "
+    "coordinates to the robot's frame, mm (a mesh in LPS is turned to RAS first).",
+    ("problem", "skull.depth_margin_mm"): "The tool tip's depth setpoint lies this far outside "
+    "the inner surface (negative: past it).",
+    ("problem", "skull.registration"): "Instead of image_to_robot: fiducials in both frames, "
+    "fitted by a rigid least-squares registration; its RMS error goes into the plan's "
+    "metadata.",
+    ("problem", "skull.registration.image_fiducials_mm"): "At least 3 points, not on one line, "
+    "in `frame`.",
+    ("problem", "skull.registration.robot_fiducials_mm"): "The same points in the robot's "
+    "frame, in the same order.",
     ("problem", "planner"): "Settings of the planners, one table each.",
     ("problem", "planner.NAME"): "The settings of the planner NAME: see Planner settings.",
     ("robot", "name"): "The robot's name.",

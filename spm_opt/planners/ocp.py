@@ -349,6 +349,7 @@ _FORMULATION_SOURCES = (
     "planners/ocp.py",
     "planners/ocp_assembly.py",
     "planners/ocp_transcription.py",
+    "skull/arc_fit.py",
     "model/kinematics.py",
     "model/dynamics.py",
     "model/torque_table.py",
@@ -414,20 +415,22 @@ def _solver(
 
 
 def _arcs(problem: Problem) -> np.ndarray:
-    """Per segment (segments, 14): the arc's a, w, n, n × end, ρ0 (mm), ρ' (mm/rad) (the
-    great circle the cut follows, as the Contour has it). Lengths in mm keep the squared
-    rows of the path constraints near 1."""
+    """Per segment (segments, ARC_PARAMETERS): the arc's a, w, n, n × end (the great circle
+    the cut follows, as the Contour has it), and the fit of the skull's radius near it
+    (φ_c, φ_h, o_h, C_kj in mm). Lengths in mm keep the squared rows of the path
+    constraints near 1."""
     contour = problem.contour
     sweep = contour.sweep[:, None]
     end = contour.start * np.cos(sweep) + contour.inplane * np.sin(sweep)
+    fits = problem.arc_radius_fits
     return np.concatenate(
         [
             contour.start,
             contour.inplane,
             contour.normal,
             np.cross(contour.normal, end),
-            contour.start_radius[:, None] / MM,
-            contour.radius_slope[:, None] / MM,
+            np.array([[fit.centre, fit.half_span, fit.across] for fit in fits]),
+            np.array([fit.coefficients.ravel() / MM for fit in fits]),
         ],
         axis=1,
     )

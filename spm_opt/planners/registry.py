@@ -10,6 +10,7 @@ from typing import Any, Protocol, TypeVar
 
 from spm_opt.errors import InputError, PlanningError, UnknownPlannerError
 from spm_opt.problem import Problem
+from spm_opt.skull.depth import depth_setpoint
 from spm_opt.trajectory import Trajectory, package_version
 
 
@@ -135,4 +136,9 @@ def plan(
         statistics=statistics,
         spm_opt_version=package_version(),
     )
+    if problem.inner_radius is not None:
+        margin = problem.skull.depth_margin
+        trajectory.metadata["depth_setpoint"] = depth_setpoint(
+            problem.inner_radius, margin, trajectory
+        )
     return trajectory

@@ -169,10 +169,11 @@ def cuts(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
         _, q, _, _ = _samples(outcome)
         directions = kinematics.forward_kinematics(q, 1.0)
         near = contour.nearest(directions)
-        cut = near.radius[:, None] * directions / MM
+        radius = contour.surface.radius(directions)
+        cut = radius[:, None] * directions / MM
         style = _style(index, len(q))
         top.plot(cut[:, 0], cut[:, 1], **style, linewidth=1, label=outcome.planner)
-        along, deviation = contour.progress(near) / MM, contour.chord(near) / MM
+        along, deviation = contour.progress(near) / MM, contour.distance(near, radius) / MM
         off.semilogy(along, np.maximum(deviation, FLOOR_MM), **style, linewidth=1)
     _contour_from_above(top, problem)
     _deviation_axes(off, problem)

@@ -1,0 +1,420 @@
+"""The 3-D review page of a plan: one self-contained HTML file (plotly, its JavaScript
+inlined) that opens offline.
+
+It shows, mm in the robot's frame (:mod:`spm_opt.report.review_scene`): the skull around
+the flap, the landmarks, the planned contour, the planned cut coloured by its distance from
+the contour, the executed cut of a log, and the robot (arcs, platforms, tool) at a time a
+slider and a play button choose; above the plot, the evaluator's headline figures.
+"""
+
+from __future__ import annotations
+
+import html
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from spm_opt.errors import require
+from spm_opt.model.params import MM
+from spm_opt.report.review_scene import Cut, ReviewScene, review_scene
+from spm_opt.report.robot_geometry import robot_pose
+
+if TYPE_CHECKING:
+    import pandas as pd
+    import plotly.graph_objects as go
+
+    from spm_opt.evaluate import Report
+    from spm_opt.model.params import Robot
+    from spm_opt.problem import Problem
+    from spm_opt.skull.surface import Skull
+    from spm_opt.trajectory import Trajectory
+
+POSES = 90
+"""Times the slider shows the robot at, over the plan's duration."""
+BACKGROUND = "#ffffff"
+"""The page's and the plot's background colour."""
+SKULL_COLOUR = "#d9d9d9"
+PLOT_HEIGHT_PX = 720
+CAMERA_DISTANCE = 0.45
+"""The camera's distance from the flap, in the scene's normalised units."""
+CAMERA_TILT = 30.0
+"""How far (deg) the camera's line of sight tilts from the flap's direction, downwards."""
+_PARTS = (
+    ("upper_arc", "upper arc (θ1)", "#1f77b4", 6),
+    ("lower_arc", "lower arc (θ2)", "#ff7f0e", 6),
+    ("upper_platform", "upper platform", "#1f77b4", 9),
+    ("lower_platform", "lower platform", "#ff7f0e", 9),
+    ("tool", "tool", "#222222", 4),
+)
+"""Each of the robot's parts: its :class:`RobotPose` field, name, colour and line width."""
+
+
+def review_page(
+    problem: Problem,
+    skull: Skull,
+    trajectory: Trajectory,
+    log: pd.DataFrame | None = None,
+    report: Report | None = None,
+) -> str:
+    """The review page, a whole HTML document (about 5 MB, plotly's JavaScript inlined).
+
+    Parameters
+    ----------
+    problem : Problem
+    skull : Skull
+        The skull the cut lies on (its outer mesh, or its surface without one).
+    trajectory : Trajectory
+        The plan.
+    log : pandas.DataFrame, optional
+        An execution log's table (:func:`spm_opt.input_limits.read_execution_log`): its
+        measured cut is drawn too.
+    report : Report, optional
+        The plan's report; by default ``evaluate(problem, trajectory)``.
+    """
+    from spm_opt.evaluate import evaluate
+
+    require("plotly", "the review page")
+    report = evaluate(problem, trajectory) if report is None else report
+    scene = review_scene(problem, skull, trajectory, log)
+    figure = review_figure(problem, scene, trajectory)
+    plot = figure.to_html(include_plotlyjs=True, full_html=False, auto_play=False)
+    title = f"{problem.name}: {report.planner or 'plan'}"
+    return _DOCUMENT.format(
+        title=html.escape(title),
+        background=BACKGROUND,
+        table=_table(headline_rows(report, scene, skull)),
+        violations=_violations(report),
+        plot=plot,
+    )
+
+
+def headline_rows(
+    report: Report, scene: ReviewScene, skull: Skull | None = None
+) -> list[tuple[str, str]]:
+    """The figures the page's table shows, as (what, value with its unit): the report's,
+    and of a skull from imaging its registration's error and the landmarks' moves onto
+    it."""
+    rows = [
+        ("planner", report.planner or "(unknown)"),
+        ("duration", f"{report.duration_s:.2f} s"),
+        ("over the duration's lower bound", f"{report.duration_over_lower_bound:.3f}"),
+        ("max off the contour", f"{report.max_contour_deviation_mm:.3f} mm"),
+        ("RMS off the contour", f"{report.rms_contour_deviation_mm:.3f} mm"),
+        ("max tool speed", f"{report.max_tool_speed_mm_s:.2f} mm/s"),
+        ("contour never cut inside the tube", f"{report.coverage_gap_mm:.2f} mm"),
+        ("max landmark error", f"{report.max_landmark_error_mm:.3f} mm"),
+        ("violations", str(len(report.violations))),
+    ]
+    if report.max_tool_incidence_deg is not None:
+        rows.append(("max tool incidence", f"{report.max_tool_incidence_deg:.1f}°"))
+    if report.max_depth_speed_mm_s is not None:
+        rows.append(("max depth speed", f"{report.max_depth_speed_mm_s:.2f} mm/s"))
+        rows.append(
+            ("max depth acceleration", f"{report.max_depth_acceleration_mm_s2:.1f} mm/s²")
+        )
+    if skull is not None and skull.registration_rms_mm is not None:
+        rows.append(("registration RMS error", f"{skull.registration_rms_mm:.3f} mm"))
+    if skull is not None and skull.landmark_shifts_mm is not None:
+        moved = float(np.max(np.abs(skull.landmark_shifts_mm)))
+        rows.append(("landmarks moved onto the mesh", f"≤ {moved:.3f} mm"))
+    if scene.executed is not None:
+        worst = float(np.max(scene.executed.deviation))
+        rows.append(("executed cut: max off the contour", f"{worst:.3f} mm"))
+    return rows
+
+
+def review_figure(problem: Problem, scene: ReviewScene, trajectory: Trajectory) -> go.Figure:
+    """The plotly figure of a scene: the skull, the cuts and the robot, with frames of the
+    robot over the plan (the last traces, one per part of :data:`_PARTS` and the cut
+    point)."""
+    import plotly.graph_objects as go
+
+    traces = [_skull(scene), *_flap(scene), *_cuts(scene)]
+    times = np.linspace(trajectory.start_time, trajectory.end_time, POSES)
+    poses = _poses(problem.robot, scene, trajectory, times)
+    moving = list(range(len(traces), len(traces) + len(poses[0])))
+    traces += [_with_style(trace, index) for index, trace in enumerate(poses[0])]
+    frames = [
+        go.Frame(data=pose, traces=moving, name=_frame_name(t))
+        for t, pose in zip(times, poses, strict=True)
+    ]
+    figure = go.Figure(data=traces, frames=frames)
+    figure.update_layout(
+        height=PLOT_HEIGHT_PX,
+        margin={"l": 0, "r": 0, "t": 10, "b": 0},
+        paper_bgcolor=BACKGROUND,
+        legend={"x": 0.01, "y": 0.98, "bgcolor": "rgba(255,255,255,0.7)"},
+        scene=_scene_layout(problem, scene),
+        sliders=[_slider(times)],
+        updatemenus=[_play_buttons()],
+    )
+    return figure
+
+
+def _skull(scene: ReviewScene) -> go.Mesh3d:
+    import plotly.graph_objects as go
+
+    vertices, faces = scene.skull_vertices.astype(np.float32), scene.skull_faces
+    return go.Mesh3d(
+        x=vertices[:, 0],
+        y=vertices[:, 1],
+        z=vertices[:, 2],
+        i=faces[:, 0].astype(np.int32),
+        j=faces[:, 1].astype(np.int32),
+        k=faces[:, 2].astype(np.int32),
+        color=SKULL_COLOUR,
+        opacity=1.0,
+        flatshading=False,
+        lighting={"ambient": 0.45, "diffuse": 0.8, "specular": 0.05, "roughness": 0.9},
+        lightposition={"x": -1e5, "y": 5e4, "z": 1e5},
+        name="skull",
+        showlegend=True,
+        hoverinfo="skip",
+    )
+
+
+def _flap(scene: ReviewScene) -> list[go.Scatter3d]:
+    """The landmarks with their names and the planned contour."""
+    import plotly.graph_objects as go
+
+    landmarks = scene.landmarks
+    contour = go.Scatter3d(
+        **_xyz(scene.contour),
+        mode="lines",
+        line={"color": "#2ca02c", "width": 3, "dash": "dash"},
+        name="planned contour",
+        hoverinfo="skip",
+    )
+    markers = go.Scatter3d(
+        **_xyz(landmarks),
+        mode="markers+text",
+        marker={"size": 5, "color": "#000000", "symbol": "diamond"},
+        text=list(scene.landmark_names),
+        textposition="top center",
+        textfont={"size": 14, "color": "#000000"},
+        name="landmarks",
+        hovertemplate="%{text}: (%{x:.1f}, %{y:.1f}, %{z:.1f}) mm<extra></extra>",
+    )
+    return [contour, markers]
+
+
+def _cuts(scene: ReviewScene) -> list[go.Scatter3d]:
+    """The planned cut coloured by its distance from the contour, and the executed cut."""
+    import plotly.graph_objects as go
+
+    planned = scene.planned
+    cuts = [
+        go.Scatter3d(
+            **_xyz(planned.points),
+            mode="lines",
+            line={
+                "color": planned.deviation,
+                "colorscale": "Plasma",
+                "cmin": 0.0,
+                "cmax": max(float(np.max(planned.deviation)), 1e-3),
+                "width": 5,
+                "colorbar": {
+                    "title": {"text": "planned cut<br>off the contour (mm)"},
+                    "len": 0.6,
+                    "x": 0.98,
+                },
+            },
+            customdata=np.column_stack([planned.t, planned.deviation]),
+            hovertemplate="planned, t = %{customdata[0]:.2f} s: "
+            "%{customdata[1]:.3f} mm off the contour<extra></extra>",
+            name="planned cut",
+        )
+    ]
+    if scene.executed is not None:
+        cuts.append(_executed(scene.executed))
+    return cuts
+
+
+def _executed(cut: Cut) -> go.Scatter3d:
+    import plotly.graph_objects as go
+
+    return go.Scatter3d(
+        **_xyz(cut.points),
+        mode="lines",
+        line={"color": "#17becf", "width": 4},
+        customdata=np.column_stack([cut.t, cut.deviation]),
+        hovertemplate="executed, t = %{customdata[0]:.2f} s: "
+        "%{customdata[1]:.3f} mm off the contour<extra></extra>",
+        name="executed cut (measured)",
+    )
+
+
+def _poses(
+    robot: Robot, scene: ReviewScene, trajectory: Trajectory, times: np.ndarray
+) -> list[list[go.Scatter3d]]:
+    """At each time, the robot's parts and the point being cut, as bare traces (only x, y
+    and z: a frame changes nothing else)."""
+    import plotly.graph_objects as go
+
+    q = trajectory.position(times)
+    planned = scene.planned
+    at = np.searchsorted(planned.t, times).clip(0, len(planned.t) - 1)
+    poses = []
+    for angles, point in zip(q, planned.points[at], strict=True):
+        pose = robot_pose(robot, angles)
+        parts = [getattr(pose, field) / MM for field, *_ in _PARTS]
+        poses.append([go.Scatter3d(**_xyz(part)) for part in [*parts, point[None, :]]])
+    return poses
+
+
+def _with_style(trace: go.Scatter3d, index: int) -> go.Scatter3d:
+    """The first pose's ``index``-th trace with its part's name, colour and width."""
+    if index == len(_PARTS):
+        trace.update(
+            mode="markers",
+            marker={"size": 6, "color": "#d62728", "line": {"width": 1, "color": "#000000"}},
+            name="cut point at the slider's time",
+            hoverinfo="skip",
+        )
+        return trace
+    _, name, colour, width = _PARTS[index]
+    trace.update(mode="lines", line={"color": colour, "width": width}, name=name, hoverinfo="skip")
+    return trace
+
+
+def _xyz(points: np.ndarray) -> dict[str, np.ndarray]:
+    points = np.asarray(points, dtype=np.float32)
+    return {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
+
+
+def _frame_name(t: float) -> str:
+    return f"{t:.2f} s"
+
+
+def _scene_layout(problem: Problem, scene: ReviewScene) -> dict:
+    """Axes in mm over the whole robot, equal scales, and a camera that looks at the flap
+    from outside, its line of sight tilted :data:`CAMERA_TILT` down from the flap's
+    direction."""
+    robot = problem.robot
+    reach = max(robot.upper_arc.rail_radius, robot.upper_platform_radius) / MM + 30.0
+    ranges = np.array([[-reach, reach], [-reach, reach], [0.0, reach]])
+    spans = ranges[:, 1] - ranges[:, 0]
+    aspect = spans / spans.max()
+    target = scene.contour.mean(axis=0)
+    direction = scene.flap_direction
+    horizontal = np.array([direction[0], direction[1], 0.0])
+    if np.linalg.norm(horizontal) < 1e-6:
+        horizontal = np.array([-1.0, 0.0, 0.0])  # above the vertex: from the front (−x)
+    horizontal /= np.linalg.norm(horizontal)
+    tilt = np.radians(CAMERA_TILT)
+    elevation = min(np.arcsin(np.clip(direction[2], -1.0, 1.0)), np.radians(80.0))
+    sight = np.cos(elevation - tilt) * horizontal + [0.0, 0.0, np.sin(elevation - tilt)]
+    centre = (target - ranges.mean(axis=1)) / spans * aspect
+    eye = centre + CAMERA_DISTANCE * sight
+
+    def axis(name: str, span: np.ndarray) -> dict:
+        return {
+            "title": {"text": f"{name} (mm)"},
+            "range": span.tolist(),
+            "backgroundcolor": BACKGROUND,
+            "gridcolor": "#e5e5e5",
+            "showbackground": True,
+        }
+
+    return {
+        "xaxis": axis("x", ranges[0]),
+        "yaxis": axis("y", ranges[1]),
+        "zaxis": axis("z", ranges[2]),
+        "aspectmode": "manual",
+        "aspectratio": dict(zip("xyz", aspect.tolist(), strict=True)),
+        "camera": {
+            "center": dict(zip("xyz", centre.tolist(), strict=True)),
+            "eye": dict(zip("xyz", eye.tolist(), strict=True)),
+            "up": {"x": 0, "y": 0, "z": 1},
+        },
+        "bgcolor": BACKGROUND,
+    }
+
+
+def _slider(times: np.ndarray) -> dict:
+    steps = [
+        {
+            "method": "animate",
+            "label": f"{t:.1f}",
+            "args": [
+                [_frame_name(t)],
+                {
+                    "mode": "immediate",
+                    "frame": {"duration": 0, "redraw": True},
+                    "transition": {"duration": 0},
+                },
+            ],
+        }
+        for t in times
+    ]
+    return {
+        "active": 0,
+        "steps": steps,
+        "currentvalue": {"prefix": "plan time (s): "},
+        "x": 0.1,
+        "len": 0.88,
+        "y": 0.02,
+        "pad": {"t": 10},
+    }
+
+
+def _play_buttons() -> dict:
+    play = {
+        "frame": {"duration": 60, "redraw": True},
+        "fromcurrent": True,
+        "transition": {"duration": 0},
+    }
+    pause = {"mode": "immediate", "frame": {"duration": 0, "redraw": False}}
+    return {
+        "type": "buttons",
+        "direction": "left",
+        "x": 0.09,
+        "y": 0.02,
+        "xanchor": "right",
+        "yanchor": "top",
+        "pad": {"t": 40},
+        "buttons": [
+            {"label": "play", "method": "animate", "args": [None, play]},
+            {"label": "pause", "method": "animate", "args": [[None], pause]},
+        ],
+    }
+
+
+def _table(rows: list[tuple[str, str]]) -> str:
+    """The headline figures as one row of headings over one row of values."""
+    heads = "".join(f"<th>{html.escape(what)}</th>" for what, _ in rows)
+    values = "".join(f"<td>{html.escape(value)}</td>" for _, value in rows)
+    return f'<table class="headline">\n<tr>{heads}</tr>\n<tr>{values}</tr>\n</table>'
+
+
+def _violations(report: Report) -> str:
+    if not report.violations:
+        return "<p>No limit is violated.</p>"
+    items = "\n".join(f"<li>{html.escape(str(v))}</li>" for v in report.violations)
+    summary = f"<summary>{len(report.violations)} violation(s)</summary>"
+    return f"<details>{summary}<ul>\n{items}\n</ul></details>"
+
+
+_DOCUMENT = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<title>{title}</title>
+<style>
+body {{ background: {background}; font-family: sans-serif; margin: 12px 18px; }}
+h1 {{ font-size: 18px; margin: 0 0 8px; }}
+table.headline {{ border-collapse: collapse; font-size: 13px; }}
+table.headline th, table.headline td {{ border: 1px solid #ccc; padding: 2px 8px; }}
+table.headline th {{ font-weight: normal; color: #444; }}
+table.headline td {{ text-align: center; }}
+details, p {{ font-size: 13px; }}
+</style>
+</head>
+<body>
+<h1>{title}</h1>
+{table}
+{violations}
+{plot}
+</body>
+</html>
+"""

@@ -1,0 +1,1 @@
+"""The skull's surface from imaging: meshes, markups, registration, bone."""

@@ -1,0 +1,182 @@
+"""A problem file's skull: the ``[skull]`` table and the ``landmarks_file`` key.
+
+```toml
+landmarks_file = "flap.mrk.json"      # a 3D Slicer markups file, relative to this file
+[skull]
+outer_mesh = "skull_outer.stl"        # relative to this file, mm, in `frame`
+inner_mesh = "skull_inner.stl"        # optional
+frame = "RAS"                         # or "LPS": the meshes' frame
+image_to_robot = [[1, 0, 0, 0.5], [0, 1, 0, 21.1], [0, 0, 1, -6.2], [0, 0, 0, 1]]
+[skull.registration]                  # or, instead of image_to_robot:
+image_fiducials_mm = [[...], ...]     # in `frame`
+robot_fiducials_mm = [[...], ...]
+```
+
+``image_to_robot`` takes the image's RAS coordinates (mm) to the robot's frame (mm): a mesh
+in LPS is turned to RAS first, so the LPS and RAS copies of one skull take the same
+transform.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from spm_opt.errors import InputError
+from spm_opt.fields import Table
+from spm_opt.model.params import MM
+from spm_opt.skull.frames import FRAMES, to_ras
+from spm_opt.skull.landmark_surface import LandmarkSurface
+from spm_opt.skull.markups import read_markups
+from spm_opt.skull.registration import apply, check_transform, fit_rigid
+from spm_opt.skull.surface import Skull
+
+
+@dataclass(frozen=True)
+class SkullKeys:
+    """What a problem file says of its skull, read and converted.
+
+    Attributes
+    ----------
+    image_to_robot_mm : ndarray (4, 4) or None
+        From the image's RAS coordinates to the robot's frame, mm.
+    frame : str
+        The meshes' frame, "RAS" or "LPS".
+    outer, inner : trimesh.Trimesh or None
+        The meshes in the robot's frame, m.
+    registration_rms_mm : float or None
+    field : str
+        The file's name for the outer mesh's key, for messages.
+    depth_margin : float, m
+    """
+
+    image_to_robot_mm: np.ndarray | None
+    frame: str
+    outer: object | None
+    inner: object | None
+    registration_rms_mm: float | None
+    field: str
+    depth_margin: float
+
+
+def read_skull_table(table: Table, folder: Path) -> SkullKeys | None:
+    """The ``[skull]`` table (None when the file has none)."""
+    if not table.keys():
+        return None
+    frame = table.string("frame", choices=FRAMES)
+    matrix, rms = _transform(table, frame)
+    outer_key = table.string("outer_mesh", default="")
+    inner_key = table.string("inner_mesh", default="")
+    if inner_key and not outer_key:
+        raise table.error("inner_mesh", inner_key, "expected an outer_mesh beside it")
+    margin = table.number("depth_margin_mm", default=0.0, minimum=-20.0, maximum=20.0)
+    table.finish()
+    outer = inner = None
+    if outer_key:
+        from spm_opt.skull.mesh import load_mesh, to_robot
+
+        outer = to_robot(
+            load_mesh(folder / outer_key, frame, table.name("outer_mesh")), frame, matrix
+        )
+        if inner_key:
+            inner = to_robot(
+                load_mesh(folder / inner_key, frame, table.name("inner_mesh")), frame, matrix
+            )
+    return SkullKeys(matrix, frame, outer, inner, rms, table.name("outer_mesh"), margin * MM)
+
+
+def _transform(table: Table, frame: str) -> tuple[np.ndarray, float | None]:
+    """The image-to-robot transform (4, 4), mm, and the registration's RMS error (mm, or
+    None for a matrix given as it is)."""
+    has_matrix, has_fiducials = table.has("image_to_robot"), table.has("registration")
+    if has_matrix == has_fiducials:
+        raise InputError(
+            f"{table.name('image_to_robot')}: expected either image_to_robot (a 4x4 matrix, "
+            f"mm) or a [{table.name('registration')}] table of fiducials, "
+            + ("not both" if has_matrix else "got neither")
+        )
+    if has_matrix:
+        return check_transform(table.raw("image_to_robot"), table.name("image_to_robot")), None
+    fiducials = table.table("registration")
+    image = _points(fiducials, "image_fiducials_mm")
+    robot = _points(fiducials, "robot_fiducials_mm")
+    fiducials.finish()
+    registration = fit_rigid(to_ras(image, frame), robot, fiducials.name("image_fiducials_mm"))
+    return registration.matrix_mm, registration.rms_mm
+
+
+def _points(table: Table, key: str) -> np.ndarray:
+    """A list of 3-D points, mm."""
+    value = table.raw(key)
+    try:
+        points = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise table.error(key, value, "expected a list of [x, y, z] points in mm") from None
+    if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+        raise table.error(key, value, "expected a list of [x, y, z] points in mm, all finite")
+    return points
+
+
+def markup_landmarks(
+    path: Path, keys: SkullKeys | None, field: str
+) -> tuple[tuple[str, ...], np.ndarray, bool]:
+    """The landmarks of a markups file: names, points (n, 3) in the robot's frame, m, and
+    whether the curve is closed."""
+    if keys is None or keys.image_to_robot_mm is None:
+        raise InputError(
+            f"{field} = '{path.name}': a markups file is in the image's coordinates; the "
+            "[skull] table must give image_to_robot or a registration"
+        )
+    markups = read_markups(path)
+    return (
+        markups.labels,
+        apply(keys.image_to_robot_mm, markups.points_ras_mm) * MM,
+        (markups.closed),
+    )
+
+
+def skull_on_mesh(
+    keys: SkullKeys, names: tuple[str, ...], landmarks: np.ndarray
+) -> tuple[Skull, np.ndarray]:
+    """The problem's skull and its landmarks moved along their directions onto the outer
+    mesh (m); without a mesh, the smooth surface through the landmarks as they are."""
+    if keys.outer is None:
+        surface = LandmarkSurface(landmarks)
+        return Skull(surface, registration_rms_mm=keys.registration_rms_mm), landmarks
+    from spm_opt.skull.raycast import MeshSurface
+
+    surface = MeshSurface(keys.outer, keys.inner)
+    if not surface.contains_isocenter():
+        raise InputError(
+            f"{keys.field}: the isocenter (the robot's origin) lies outside the outer surface "
+            "once image_to_robot is applied; check the transform and the mesh's frame"
+        )
+    radii = np.linalg.norm(landmarks, axis=1)
+    directions = landmarks / radii[:, None]
+    crossings = surface.crossings(directions)
+    on_mesh = surface.radius(directions)
+    for name, count, radius in zip(names, crossings, on_mesh, strict=True):
+        if count != 1 or not np.isfinite(radius):
+            raise InputError(
+                f"landmark {name}: the ray from the isocenter through it meets the outer "
+                f"surface {count} times; it must meet it once"
+            )
+    digest = hashlib.sha256()
+    for mesh in (keys.outer, keys.inner):
+        if mesh is not None:
+            digest.update(np.ascontiguousarray(mesh.vertices).tobytes())
+            digest.update(np.ascontiguousarray(mesh.faces).tobytes())
+    digest.update(np.float64(keys.depth_margin).tobytes())
+    skull = Skull(
+        surface=surface,
+        outer_mesh=keys.outer,
+        inner_mesh=keys.inner,
+        registration_rms_mm=keys.registration_rms_mm,
+        landmark_shifts_mm=(on_mesh - radii) / MM,
+        fingerprint=digest.hexdigest(),
+        depth_margin=keys.depth_margin,
+    )
+    return skull, on_mesh[:, None] * directions

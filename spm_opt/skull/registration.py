@@ -1,0 +1,133 @@
+"""From the image to the robot: a rigid transform given as a matrix, or fitted to fiducials
+located in both.
+
+Every transform here is a homogeneous matrix (4, 4) taking the image's RAS coordinates, mm,
+to the robot's frame, mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from spm_opt.errors import InputError
+from spm_opt.input_limits import excerpt
+
+COLLINEAR_MM = 1e-6
+"""Fiducials all within this distance of one line leave the rotation about it undetermined."""
+ORTHONORMAL_TOLERANCE = 1e-6
+"""Largest entry of ``RᵀR - I`` of a rotation given as a matrix."""
+_RIGID = "a rigid transform: rotation and translation in mm; a mirror or scale is not allowed"
+
+
+@dataclass(frozen=True)
+class Registration:
+    """A rigid fit of fiducials located in the image and by the robot.
+
+    Attributes
+    ----------
+    matrix_mm : ndarray (4, 4)
+        From the image's RAS coordinates, mm, to the robot's frame, mm.
+    rms_mm : float
+        The fiducial registration error: the RMS of :attr:`residuals_mm`, mm.
+    residuals_mm : ndarray (n,)
+        Distance from each robot fiducial to its image fiducial once transformed, mm.
+    """
+
+    matrix_mm: np.ndarray
+    rms_mm: float
+    residuals_mm: np.ndarray
+
+
+def fit_rigid(image_mm: np.ndarray, robot_mm: np.ndarray, field: str) -> Registration:
+    """The rigid transform that best takes the image fiducials (n, 3), mm, onto the robot
+    fiducials (n, 3), mm, in the least-squares sense (Kabsch's fit:
+    ``Rotation.align_vectors`` on the centred points; a rotation, never a mirror).
+
+    Raises InputError naming ``field`` for fewer than 3 fiducials, different counts,
+    values that are not finite, or fiducials all on one line.
+    """
+    image = _fiducials(image_mm, field, "image")
+    robot = _fiducials(robot_mm, field, "robot")
+    if len(image) != len(robot):
+        raise InputError(
+            f"{field}: {len(image)} image fiducials but {len(robot)} robot fiducials; "
+            "expected the same points located in both"
+        )
+    image_centre, robot_centre = image.mean(axis=0), robot.mean(axis=0)
+    rotation, _ = Rotation.align_vectors(robot - robot_centre, image - image_centre)
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation.as_matrix()
+    matrix[:3, 3] = robot_centre - matrix[:3, :3] @ image_centre
+    residuals = np.linalg.norm(apply(matrix, image) - robot, axis=1)
+    return Registration(matrix, float(np.sqrt(np.mean(residuals**2))), residuals)
+
+
+def _fiducials(value: np.ndarray, field: str, kind: str) -> np.ndarray:
+    """``value`` as at least 3 finite points (n, 3), mm, not all on one line."""
+    try:
+        points = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        points = np.empty(0)
+    if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+        raise InputError(
+            f"{field}: the {kind} fiducials {excerpt(_shown(value))}: expected a list of [x, y, z] "
+            "points in mm, all finite"
+        )
+    if len(points) < 3:
+        raise InputError(
+            f"{field}: {len(points)} {kind} fiducials; expected at least 3, not on one line"
+        )
+    centred = points - points.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    off_line = centred - np.outer(centred @ axis, axis)
+    if np.max(np.linalg.norm(off_line, axis=1)) <= COLLINEAR_MM:
+        raise InputError(
+            f"{field}: the {len(points)} {kind} fiducials lie on one line; the rotation about "
+            "it is undetermined: expected at least 3 points not on one line"
+        )
+    return points
+
+
+def check_transform(matrix: object, field: str) -> np.ndarray:
+    """A user's image-to-robot matrix (4, 4), mm, checked to be a rigid transform: finite,
+    last row [0, 0, 0, 1], and its upper 3 × 3 a rotation (orthonormal to
+    :data:`ORTHONORMAL_TOLERANCE`, determinant +1). Returns it as an array."""
+    try:
+        array = np.array(matrix, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(
+            f"{field} = {excerpt(_shown(matrix))}: expected 4 rows of 4 numbers"
+        ) from None
+    if array.shape != (4, 4):
+        raise InputError(
+            f"{field} = {excerpt(_shown(matrix))}: shape {array.shape}; expected 4 rows of 4 "
+            "numbers"
+        )
+    if not np.all(np.isfinite(array)):
+        raise InputError(f"{field} = {excerpt(array.tolist())}: expected finite numbers")
+    if not np.array_equal(array[3], [0.0, 0.0, 0.0, 1.0]):
+        raise InputError(f"{field}: last row {array[3].tolist()}; expected [0, 0, 0, 1] ({_RIGID})")
+    rotation = array[:3, :3]
+    error = np.max(np.abs(rotation.T @ rotation - np.eye(3)))
+    if error > ORTHONORMAL_TOLERANCE:
+        raise InputError(
+            f"{field}: the upper 3x3 is not orthonormal (RᵀR differs from I by {error:.3g}); "
+            f"expected {_RIGID}"
+        )
+    if np.linalg.det(rotation) < 0:
+        raise InputError(f"{field}: the upper 3x3 has determinant -1 (a mirror); expected {_RIGID}")
+    return array
+
+
+def _shown(value: object) -> object:
+    """``value`` for a message: an array as a list (whose excerpt is one line)."""
+    return value.tolist() if isinstance(value, np.ndarray) else value
+
+
+def apply(matrix_mm: np.ndarray, points_mm: np.ndarray) -> np.ndarray:
+    """Points (n, 3), mm, transformed by the homogeneous matrix (4, 4), mm."""
+    points = np.asarray(points_mm, dtype=float)
+    return points @ matrix_mm[:3, :3].T + matrix_mm[:3, 3]

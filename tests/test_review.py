@@ -1,0 +1,268 @@
+"""The 3-D review page (spm_opt.report.review), its PNG (review_png), the robot drawn at
+joint angles (robot_geometry) and the ``spm-opt review`` command."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import trimesh
+from conftest import PAPER_PROBLEM
+from test_bad_inputs import assert_one_error, run_cli
+
+import spm_opt as so
+from spm_opt.evaluate import evaluate
+from spm_opt.execution.log import COLUMNS
+from spm_opt.model import kinematics
+from spm_opt.model.params import MM
+from spm_opt.report.review import BACKGROUND, review_page
+from spm_opt.report.review_png import review_png
+from spm_opt.report.review_scene import (
+    MAX_SKULL_FACES,
+    SKULL_REACH,
+    decimate,
+    executed_angles,
+    review_scene,
+)
+from spm_opt.report.robot_geometry import TOOL_OVERHANG, robot_pose
+from spm_opt.skull.surface import Skull
+
+SKULL_RADIUS = 0.07
+"""The test skull: a sphere of 70 mm about the isocenter, m."""
+
+
+class _Sphere:
+    """A skull surface of :data:`SKULL_RADIUS` in every direction."""
+
+    def radius(self, directions: np.ndarray) -> np.ndarray:
+        return np.full(len(np.atleast_2d(directions)), SKULL_RADIUS)
+
+    def radius_gradient(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = np.atleast_2d(directions)
+        return self.radius(p), np.zeros_like(p)
+
+
+@pytest.fixture(scope="module")
+def sphere() -> Skull:
+    return Skull(surface=_Sphere())
+
+
+@pytest.fixture(scope="module")
+def page(paper_problem: so.Problem, sphere: Skull, baseline: so.Trajectory) -> str:
+    return review_page(paper_problem, sphere, baseline)
+
+
+def _log_table(trajectory: so.Trajectory, offset_rad: float = 0.002) -> dict[str, np.ndarray]:
+    """An execution log's columns for a run that measures the plan ``offset_rad`` off, after
+    an approach row and with one failed read."""
+    t = np.linspace(trajectory.start_time, trajectory.end_time, 801)
+    q = trajectory.position(t) + offset_rad
+    columns: dict[str, np.ndarray] = {name: np.zeros(len(t) + 1) for name in COLUMNS}
+    columns["time_s"] = np.concatenate([[-0.01], t])
+    columns["phase"] = np.array(["approach", *["plan"] * len(t)], dtype=object)
+    for joint in (0, 1):
+        measured = np.concatenate([[0.0], q[:, joint]])
+        measured[5] = np.nan  # a failed read
+        columns[f"position_theta{joint + 1}_rad"] = measured
+    return columns
+
+
+def test_the_page_is_one_offline_file_with_the_landmarks_and_the_headline_figures(
+    paper_problem: so.Problem, baseline: so.Trajectory, page: str
+) -> None:
+    assert page.startswith("<!DOCTYPE html>")
+    assert not re.search(r"<script[^>]*\bsrc=", page), "a script loaded from elsewhere"
+    assert "plotly.js" in page and len(page) > 3e6  # the library inlined
+    assert "Plotly.addFrames" in page  # the robot over the plan
+    for name in paper_problem.landmark_names:
+        assert f'"{name}"' in page
+    report = evaluate(paper_problem, baseline)
+    for figure in (
+        f"{report.duration_s:.2f} s",
+        f"{report.max_contour_deviation_mm:.3f} mm",
+        f"{report.max_tool_speed_mm_s:.2f} mm/s",
+        f"<td>{len(report.violations)}</td>",
+    ):
+        assert figure in page, figure
+
+
+def test_the_scene_maps_joint_angles_to_cut_points_on_the_skull(
+    paper_problem: so.Problem, sphere: Skull, baseline: so.Trajectory
+) -> None:
+    log = _log_table(baseline)
+    scene = review_scene(paper_problem, sphere, baseline, pd.DataFrame(log))
+    planned = scene.planned
+    assert np.allclose(np.linalg.norm(planned.points, axis=1), SKULL_RADIUS / MM)
+    p = kinematics.forward_kinematics(baseline.position(planned.t[[0, -1]]), 1.0)
+    assert np.allclose(planned.points[[0, -1]], SKULL_RADIUS * p / MM)
+    report = evaluate(paper_problem, baseline)
+    assert np.max(planned.deviation) == pytest.approx(report.max_contour_deviation_mm, rel=0.02)
+    executed = scene.executed
+    assert executed is not None and executed.t[0] >= baseline.start_time  # no approach row
+    assert len(executed.t) == 800 and np.all(np.isfinite(executed.points))  # no failed read
+    assert np.max(executed.deviation) > np.max(planned.deviation) - 1.0
+    # the skull is drawn just inside the sphere, around the flap
+    radii = np.linalg.norm(scene.skull_vertices, axis=1)
+    assert np.all((radii < SKULL_RADIUS / MM) & (radii > SKULL_RADIUS / MM - 1.0))
+
+
+def test_a_log_without_plan_rows_is_refused(baseline: so.Trajectory) -> None:
+    log = _log_table(baseline)
+    log["phase"][:] = "approach"
+    with pytest.raises(so.InputError, match="no plan rows"):
+        executed_angles(pd.DataFrame(log))
+
+
+def test_a_mesh_skull_is_cut_to_the_flap_and_decimated(
+    paper_problem: so.Problem, baseline: so.Trajectory
+) -> None:
+    mesh = trimesh.creation.icosphere(subdivisions=6, radius=SKULL_RADIUS)  # 81,920 faces
+    scene = review_scene(paper_problem, Skull(surface=_Sphere(), outer_mesh=mesh), baseline)
+    assert 1000 < len(scene.skull_faces) <= MAX_SKULL_FACES
+    centroids = scene.skull_vertices[scene.skull_faces].mean(axis=1)
+    cosine = centroids @ scene.flap_direction / np.linalg.norm(centroids, axis=1)
+    assert np.min(cosine) > np.cos(SKULL_REACH + np.radians(3.0))
+    vertices, faces = decimate(np.asarray(mesh.vertices), np.asarray(mesh.faces), 5000)
+    assert 1000 < len(faces) <= 5000
+    assert np.allclose(np.linalg.norm(vertices[np.unique(faces)], axis=1), SKULL_RADIUS, rtol=0.02)
+
+
+def test_the_robot_is_drawn_on_its_arcs_at_the_joint_angles(paper_problem: so.Problem) -> None:
+    robot = paper_problem.robot
+    q = np.radians([12.0, -20.0])
+    pose = robot_pose(robot, q)
+    n_upper, n_lower = (np.array(n) for n in kinematics.arc_normals(*q))
+    b = kinematics.forward_kinematics(q[None, :], 1.0)[0]
+    for arc, normal, radius in (
+        (pose.upper_arc, n_upper, robot.upper_arc.rail_radius),
+        (pose.lower_arc, n_lower, robot.lower_arc.rail_radius),
+    ):
+        assert np.allclose(np.linalg.norm(arc, axis=1), radius)
+        assert np.allclose(arc @ normal, 0.0, atol=1e-12)
+        assert np.all(arc[:, 2] >= -1e-12)  # over the top
+        assert np.min(np.linalg.norm(arc - radius * b, axis=1)) < radius * np.pi / 60
+    for platform, radius in (
+        (pose.upper_platform, robot.upper_platform_radius),
+        (pose.lower_platform, robot.lower_platform_radius),
+    ):
+        assert np.allclose(platform[:-1].mean(axis=0), radius * b)
+        assert np.allclose((platform - radius * b) @ b, 0.0, atol=1e-12)
+    assert np.allclose(pose.tool[1], (robot.upper_platform_radius + TOOL_OVERHANG) * b)
+
+
+def test_the_png_is_a_picture_of_sensible_size(
+    paper_problem: so.Problem, sphere: Skull, baseline: so.Trajectory, tmp_path: Path
+) -> None:
+    from matplotlib.image import imread
+
+    data = review_png(paper_problem, sphere, baseline, pd.DataFrame(_log_table(baseline)))
+    assert data.startswith(b"\x89PNG\r\n\x1a\n") and 50_000 < len(data) < 3_000_000
+    (tmp_path / "review.png").write_bytes(data)
+    height, width, _ = imread(tmp_path / "review.png").shape
+    assert 1000 < width < 3000 and 500 < height < 2000
+
+
+def _plan_file(trajectory: so.Trajectory, folder: Path) -> Path:
+    path = folder / "cubic.csv"
+    trajectory.to_csv(path)
+    return path
+
+
+def test_the_command_writes_the_page_and_the_png(
+    paper_problem: so.Problem,
+    baseline: so.Trajectory,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    plan = _plan_file(baseline, tmp_path)
+    log = tmp_path / "run.csv"
+    pd.DataFrame(_log_table(baseline)).to_csv(log, index=False)
+    out = tmp_path / "review"
+    status, shown = run_cli(
+        ["review", str(PAPER_PROBLEM), str(plan), "--log", str(log), "--out", str(out)]
+    )
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert captured.err == "" and not shown
+    assert sorted(p.name for p in out.iterdir()) == ["review.html", "review.png"]
+    assert captured.out.split() == [str(out / "review.html"), str(out / "review.png")]
+    assert "executed cut (measured)" in (out / "review.html").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("fault", ["missing plan", "out is a file", "missing log"])
+def test_the_command_refuses_bad_input_and_writes_nothing(
+    fault: str,
+    paper_problem: so.Problem,
+    baseline: so.Trajectory,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    plan = _plan_file(baseline, tmp_path)
+    out = tmp_path / "review"
+    argv = ["review", str(PAPER_PROBLEM), str(plan), "--out", str(out)]
+    expected: tuple[str, ...] = ()
+    if fault == "missing plan":
+        argv[2], expected = str(tmp_path / "none.csv"), ("none.csv",)
+    elif fault == "out is a file":
+        out.write_text("a file", encoding="utf-8")
+        expected = ("--out", "is a file")
+    else:
+        argv += ["--log", str(tmp_path / "none_log.csv")]
+        expected = ("none_log.csv", "no such file")
+    before = sorted(tmp_path.rglob("*"))
+    status, shown = run_cli(argv)
+    assert_one_error(status, capsys.readouterr().err, expected, tmp_path, shown)
+    assert sorted(tmp_path.rglob("*")) == before  # nothing written
+
+
+@pytest.mark.slow
+def test_the_page_renders_in_headless_chromium(page: str, tmp_path: Path) -> None:
+    """The scene is drawn by WebGL on software GL (SwiftShader): the middle of the plot,
+    where the camera looks at the flap, holds the light grey skull and the cut."""
+    from matplotlib.colors import to_rgb
+    from matplotlib.image import imread
+
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("chromium is not installed (apt-get install chromium)")
+    html = tmp_path / "review.html"
+    html.write_text(page, encoding="utf-8")
+    shot = tmp_path / "shot.png"
+    command = [
+        chromium,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--use-gl=swiftshader",
+        "--enable-unsafe-swiftshader",
+        "--hide-scrollbars",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        "--window-size=1200,900",
+        "--virtual-time-budget=20000",
+        f"--screenshot={shot}",
+        html.as_uri(),
+    ]
+    started = time.perf_counter()
+    subprocess.run(command, capture_output=True, timeout=180, check=False)
+    seconds = time.perf_counter() - started
+    assert shot.is_file(), f"no screenshot after {seconds:.1f} s"
+    pixels = imread(shot)[..., :3]
+    assert pixels.shape[:2] == (900, 1200)
+    # the plot's middle: below the headline table, between the legend and the colour bar
+    middle = pixels[330:600, 400:800].reshape(-1, 3)
+    background = np.array(to_rgb(BACKGROUND))
+    drawn = np.max(np.abs(middle - background), axis=1) > 0.05
+    # the skull's shades of grey, darker than the light grey box plotly shows without WebGL
+    darkest, lightest = middle.min(axis=1), middle.max(axis=1)
+    skull = (lightest - darkest < 0.03) & (darkest > 0.6) & (lightest < 0.92)
+    cut = lightest - darkest > 0.3  # the planned cut's colours
+    seen = f"{drawn.mean():.0%} drawn, {skull.mean():.0%} skull, {cut.mean():.1%} cut"
+    assert drawn.mean() > 0.5 and skull.mean() > 0.3 and cut.mean() > 0.003, (
+        f"{seen} in the middle after {seconds:.1f} s"
+    )
