@@ -210,6 +210,25 @@ def _shared_durations(outcomes: Sequence[Outcome]) -> list[str]:
     ]
 
 
+def _skull_lines(problem: Problem) -> list[str]:
+    """What the summary says of a skull from imaging: its meshes, the registration's error
+    and how far the landmarks moved onto the outer mesh."""
+    skull = problem.skull
+    if skull is None:
+        return []
+    lines = []
+    if skull.outer_mesh is not None:
+        inner = "" if skull.inner_mesh is None else f", inner {len(skull.inner_mesh.faces):,}"
+        moved = float(np.max(np.abs(skull.landmark_shifts_mm)))
+        lines.append(
+            f"- the skull from imaging: outer mesh {len(skull.outer_mesh.faces):,} triangles"
+            f"{inner}; landmarks moved onto it by at most {moved:.3f} mm"
+        )
+    if skull.registration_rms_mm is not None:
+        lines.append(f"- image-to-robot registration: RMS error {skull.registration_rms_mm:.3f} mm")
+    return lines
+
+
 def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
     """The problem and its limits, the table, then each planner's violations or error."""
     report = next((o.report for o in outcomes if o.report is not None), None)
@@ -226,6 +245,7 @@ def comparison_markdown(problem: Problem, outcomes: Sequence[Outcome]) -> str:
         + (f"{report.duration_lower_bound_s:.2f} s" if report else "(no plan evaluated)"),
         f"- segment durations in the problem (fixed-time planners): "
         f"{', '.join(f'{d:g}' for d in problem.segment_durations)} s",
+        *_skull_lines(problem),
         "",
         "Limits every plan is judged by:",
         "",

@@ -61,9 +61,7 @@ def dense_contour(problem: so.Problem, per_arc: int = 40_000) -> np.ndarray:
     return np.vstack(points)
 
 
-def deviation_from_polyline(
-    problem: so.Problem, q: np.ndarray, contour: np.ndarray
-) -> np.ndarray:
+def deviation_from_polyline(problem: so.Problem, q: np.ndarray, contour: np.ndarray) -> np.ndarray:
     """Distance (N,), m, of the cut at joint angles q from the dense contour: the cut point
     on the skull in the tool's direction, to the contour point nearest it by angle."""
     unit_contour = contour / np.linalg.norm(contour, axis=1, keepdims=True)

@@ -48,7 +48,7 @@ def arc_length_by_quadrature(contour: Contour, arc: int, angle: float) -> float:
     step = 1e-5
 
     def integrand(phi: float) -> float:
-        slope = (radius_along(contour, arc, phi + step) - radius_along(contour, arc, phi - step))
+        slope = radius_along(contour, arc, phi + step) - radius_along(contour, arc, phi - step)
         return math.hypot(radius_along(contour, arc, phi), slope / (2 * step))
 
     value, _ = quad(integrand, 0.0, angle, epsabs=0, epsrel=1e-12)

@@ -108,6 +108,8 @@ def test_planners_cut_clean_on_skulls_not_tuned_on(tmp_path, variant, planner):
     problem = so.load_problem(path)
     plan = so.plan(problem, planner)
     found = independent_check(problem, path, plan)
+    if planner.startswith("ocp"):  # the radius its NLP read, against the mesh
+        assert 0 < plan.metadata["statistics"]["skull_fit_error_mm"] < 0.05
     assert found["max_speed"] <= problem.limits.max_tool_speed * TOLERANCE
     assert found["max_distance"] <= problem.limits.contour_tolerance * TOLERANCE
     assert so.evaluate(problem, plan).violations == []
@@ -236,3 +238,12 @@ def test_a_non_manifold_mesh_is_refused(tmp_path):
     header = outer_path.read_bytes()[:80]
     outer_path.write_bytes(header + broken.export(file_type="stl")[80:])
     refused(path, tmp_path, "skull.outer_mesh", "non-manifold")
+
+
+def test_the_comparison_names_the_skull_and_its_registration(tmp_path):
+    from spm_opt.comparison import comparison_markdown
+
+    problem = so.load_problem(example(tmp_path, subdivisions=3, registration=True))
+    summary = comparison_markdown(problem, [])
+    assert f"outer mesh {len(problem.skull.outer_mesh.faces):,} triangles" in summary
+    assert "image-to-robot registration: RMS error 0.000 mm" in summary

@@ -811,6 +811,9 @@ class OcpPlanner:
                 if number == len(starts):
                     raise
         statistics = {**solution.statistics, "starts_tried": number, "start": _start_kind(start)}
+        # how far the radius the NLP reads strays from the skull's surface (a mesh's facets)
+        fit_error = max(fit.max_error for fit in problem.arc_radius_fits)
+        statistics["skull_fit_error_mm"] = fit_error / MM
         moved_checks = 0
         for round_ in range(1, REFINEMENTS + 2):
             if not with_torque and _torque_exceeded(problem, grid, bounds, solution.x):

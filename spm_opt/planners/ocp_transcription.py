@@ -81,8 +81,7 @@ class Point:
         return {
             "tool speed²": ca.sumsqr(p_dot) * rho**2 + rho_rate**2,
             # |ρ p − ρ_c c|², c the point of the arc's plane nearest p (Contour.distance)
-            "chord²": (rho - on_arc) ** 2
-            + 2 * rho * on_arc * (1 - ca.sqrt(1 - off_plane**2)),
+            "chord²": (rho - on_arc) ** 2 + 2 * rho * on_arc * (1 - ca.sqrt(1 - off_plane**2)),
             "progress speed": on_arc * angle_rate,
             "past start": pw,
             "before end": -ca.dot(p, w_end),

@@ -109,9 +109,7 @@ def headline_rows(
         rows.append(("max tool incidence", f"{report.max_tool_incidence_deg:.1f}°"))
     if report.max_depth_speed_mm_s is not None:
         rows.append(("max depth speed", f"{report.max_depth_speed_mm_s:.2f} mm/s"))
-        rows.append(
-            ("max depth acceleration", f"{report.max_depth_acceleration_mm_s2:.1f} mm/s²")
-        )
+        rows.append(("max depth acceleration", f"{report.max_depth_acceleration_mm_s2:.1f} mm/s²"))
     if skull is not None and skull.registration_rms_mm is not None:
         rows.append(("registration RMS error", f"{skull.registration_rms_mm:.3f} mm"))
     if skull is not None and skull.landmark_shifts_mm is not None:
