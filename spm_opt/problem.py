@@ -416,10 +416,7 @@ def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -
     points = np.array(points)
     skull = None
     if skull_keys is not None:
-        try:
-            skull, points = skull_on_mesh(skull_keys, tuple(names), points)
-        except InputError as error:
-            raise type(error)(f"{path}: {error}") from None
+        skull, points = skull_on_mesh(skull_keys, tuple(names), points)
     limits_table = root.table("limits", required=False)
     limits = _limits(limits_table, robot)
     planners = root.table("planner", required=False)

@@ -49,7 +49,7 @@ class SkullKeys:
         The meshes in the robot's frame, m.
     registration_rms_mm : float or None
     field : str
-        The file's name for the outer mesh's key, for messages.
+        The file and the outer mesh's key, for messages.
     depth_margin : float, m
     """
 
@@ -161,8 +161,8 @@ def skull_on_mesh(
     for name, count, radius in zip(names, crossings, on_mesh, strict=True):
         if count != 1 or not np.isfinite(radius):
             raise InputError(
-                f"landmark {name}: the ray from the isocenter through it meets the outer "
-                f"surface {count} times; it must meet it once"
+                f"{keys.field}: landmark {name}: the ray from the isocenter through it meets "
+                f"the outer surface {count} times; it must meet it once"
             )
     digest = hashlib.sha256()
     for mesh in (keys.outer, keys.inner):
