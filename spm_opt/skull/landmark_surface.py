@@ -32,7 +32,7 @@ class LandmarkSurface:
         self.tangents = np.stack([first, np.cross(mean, first)])
         """e₁, e₂ (2, 3): the tangent plane's axes at the landmarks' mean direction."""
         n = len(landmarks)
-        kernel = _cubic(self.centres[:, None, :] - self.centres[None, :, :])
+        kernel = np.linalg.norm(self.centres[:, None, :] - self.centres, axis=2) ** 3
         linear = self._linear_basis(self.centres)
         system = np.zeros((n + 3, n + 3))
         system[:n, :n], system[:n, n:], system[n:, :n] = kernel, linear, linear.T
@@ -48,21 +48,20 @@ class LandmarkSurface:
     def radius(self, directions: np.ndarray) -> np.ndarray:
         """Radius (N,), m, of the surface along unit directions (N, 3)."""
         p = np.atleast_2d(np.asarray(directions, dtype=float))
-        return _cubic(p[:, None, :] - self.centres) @ self.weights + (
-            self._linear_basis(p) @ self.linear
-        )
+        return self._radius(p, np.linalg.norm(p[:, None, :] - self.centres, axis=2))
+
+    def _radius(self, p: np.ndarray, distance: np.ndarray) -> np.ndarray:
+        """The radius at unit directions p (N, 3) from their distances (N, n) to the
+        landmarks' directions."""
+        return distance**3 @ self.weights + self._linear_basis(p) @ self.linear
 
     def radius_gradient(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Radius (N,), m, and its gradient on the unit sphere (N, 3), m/rad."""
         p = np.atleast_2d(np.asarray(directions, dtype=float))
         offsets = p[:, None, :] - self.centres
         distance = np.linalg.norm(offsets, axis=2)
+        radius = self._radius(p, distance)
         gradient = np.einsum("nk,nki->ni", 3.0 * distance * self.weights, offsets)
         gradient += self.linear[1:] @ self.tangents
         gradient -= np.einsum("ni,ni->n", gradient, p)[:, None] * p
-        return self.radius(p), gradient
-
-
-def _cubic(offsets: np.ndarray) -> np.ndarray:
-    """|offset|³ over the last axis."""
-    return np.linalg.norm(offsets, axis=-1) ** 3
+        return radius, gradient
