@@ -12,11 +12,14 @@ torque. Then, for every ``problems/*.toml`` and every planner, one plan (not tim
 - samples: points of the evaluation grid at ``--rate`` (default 1 kHz, the evaluator's).
 - cold ms: the first ``spm_opt.evaluate`` of the plan on a freshly loaded problem, which
   pays for the problem's caches (its contour and the duration lower bound).
-- warm ms, median ms: the best and the median of ``--repeats`` further calls on the same
-  problem and plan.
-- torque ms: the best of ``--repeats`` calls of the actuator torque alone on the same grid
-  (``dynamics.actuator_torque``, compiled C), the part of a warm call outside the
-  evaluator's own code.
+- best ms, median ms: the best and the median of ``--repeats`` further calls on the same
+  problem, each on a fresh ``copy.deepcopy`` of the plan (made outside the timing): the
+  evaluator keeps each trajectory object's report, and a copy is judged anew.
+- cached ms: a call on a plan already judged (the kept report, copied): what whoever
+  evaluates a plan its planner has judged pays.
+- torque ms: the median of ``--repeats`` calls of the actuator torque alone on the same
+  grid (``dynamics.actuator_torque``, compiled C), the part of a call outside the
+  evaluator's own code; own ms: median ms less torque ms, the evaluator's own code.
 
 A planner that raises on a problem gets a row with its error; the others still run.
 """
@@ -24,15 +27,17 @@ A planner that raises on a problem gets a row with its error; the others still r
 from __future__ import annotations
 
 import argparse
+import copy
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from statistics import median
 from typing import Any
 
 import numpy as np
-from timing import ROOT, best_of, write_results
+from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.model import dynamics
@@ -60,28 +65,43 @@ def warm_up(path: Path) -> dict[str, float]:
     return timings
 
 
+def seconds(work: Callable[[], object]) -> float:
+    """Wall time, s, of one ``work()``."""
+    started = time.perf_counter()
+    work()
+    return time.perf_counter() - started
+
+
+def judge_time(problem: so.Problem, trajectory: so.Trajectory, rate_hz: float) -> float:
+    """Wall time, s, of one ``spm_opt.evaluate`` of a fresh copy of ``trajectory`` (its
+    report not yet kept)."""
+    fresh = copy.deepcopy(trajectory)
+    return seconds(lambda: so.evaluate(problem, fresh, rate_hz))
+
+
 def measure(path: Path, planner: str, repeats: int, rate_hz: float) -> dict[str, Any]:
-    """Cold, warm and torque-only times, s, of evaluating one planner's plan of one problem."""
+    """Cold, warm, cached and torque-only times, s, of evaluating one planner's plan of one
+    problem (see the module docstring)."""
     trajectory = so.plan(so.load_problem(path), planner)
     problem = so.load_problem(path)
-    started = time.perf_counter()
+    cold = judge_time(problem, trajectory, rate_hz)
+    warm = [judge_time(problem, trajectory, rate_hz) for _ in range(repeats)]
     so.evaluate(problem, trajectory, rate_hz)
-    cold = time.perf_counter() - started
-    warm = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        so.evaluate(problem, trajectory, rate_hz)
-        warm.append(time.perf_counter() - started)
+    cached = seconds(lambda: so.evaluate(problem, trajectory, rate_hz))
     t = trajectory.time_grid(rate_hz)
     q, qd, qdd, _ = trajectory.states(t)
-    torque = best_of(repeats, lambda: dynamics.actuator_torque(problem.robot, q, qd, qdd))
+    torque = median(
+        seconds(lambda: dynamics.actuator_torque(problem.robot, q, qd, qdd)) for _ in range(repeats)
+    )
     return {
         "samples": len(t),
         "cold_s": cold,
         "warm_s": warm,
         "best_warm_s": min(warm),
         "median_warm_s": median(warm),
+        "cached_s": cached,
         "torque_s": torque,
+        "own_s": median(warm) - torque,
     }
 
 
@@ -100,8 +120,8 @@ def planners_option(parser: argparse.ArgumentParser, text: str | None) -> list[s
 
 def print_table(results: dict[str, dict[str, dict[str, Any]]]) -> None:
     print(
-        f"{'problem':28s} {'planner':14s} {'samples':>8s} {'cold ms':>9s} {'warm ms':>9s} "
-        f"{'median ms':>9s} {'torque ms':>9s}"
+        f"{'problem':28s} {'planner':14s} {'samples':>8s} {'cold ms':>9s} {'best ms':>9s} "
+        f"{'median ms':>9s} {'cached ms':>9s} {'torque ms':>9s} {'own ms':>9s}"
     )
     for problem, rows in results.items():
         for planner, r in rows.items():
@@ -111,7 +131,7 @@ def print_table(results: dict[str, dict[str, dict[str, Any]]]) -> None:
             print(
                 f"{problem:28s} {planner:14s} {r['samples']:8d} {1e3 * r['cold_s']:9.1f} "
                 f"{1e3 * r['best_warm_s']:9.1f} {1e3 * r['median_warm_s']:9.1f} "
-                f"{1e3 * r['torque_s']:9.1f}"
+                f"{1e3 * r['cached_s']:9.2f} {1e3 * r['torque_s']:9.1f} {1e3 * r['own_s']:9.1f}"
             )
 
 
@@ -144,7 +164,10 @@ def main() -> None:
 
     print("warm-up " + ", ".join(f"{what} {s:.3g} s" for what, s in warm.items()))
     print_table(results)
-    print(f"(warm: best of {args.repeats} calls after the cold one; grid at {args.rate:g} Hz)")
+    print(
+        f"(best, median: of {args.repeats} calls after the cold one, each on a fresh copy of "
+        f"the plan; grid at {args.rate:g} Hz)"
+    )
     print(
         f"load average (1/5/15 min) {' '.join(f'{v:.2f}' for v in load_before)} before, "
         f"{' '.join(f'{v:.2f}' for v in load_after)} after, on {os.cpu_count()} CPUs"

@@ -51,6 +51,9 @@ DEFAULT_RATE_HZ = 100.0
 _SAME_TIME_S = 1e-9
 _SIDE_STEP_S = 1e-9
 """Relative offset, s per s, of the one-sided limits at a breakpoint."""
+COLUMN_SUMS_FROM = 256
+"""Samples from which :class:`_BernsteinSums` sums each output on its own (it breaks even
+at about 200)."""
 
 
 def package_version() -> str:
@@ -373,15 +376,28 @@ class _BernsteinSums:
         self._falling = [np.ones_like(s), 1.0 - s]
 
     def __call__(self, coefficients: np.ndarray) -> np.ndarray:
-        """Values, shape t.shape + (outputs,), of coefficients (k + 1, pieces, outputs)."""
-        degree = len(coefficients) - 1
-        total = np.zeros((len(self.piece), coefficients.shape[2]))
+        """Values, shape t.shape + (outputs,), of coefficients (k + 1, pieces, outputs).
+
+        The pieces' coefficients are gathered by ``np.take`` (many times quicker than
+        indexing). From :data:`COLUMN_SUMS_FROM` samples on, each output is summed in a
+        contiguous array of its own, several times quicker than all in one (N, outputs)
+        array, which costs fewer calls on a few samples (a control cycle's one).
+        """
+        degree, outputs = len(coefficients) - 1, coefficients.shape[2]
+        by_column = len(self.piece) >= COLUMN_SUMS_FROM
+        total = np.zeros((outputs, len(self.piece)) if by_column else (len(self.piece), outputs))
         comb = 1.0
         for j in range(degree + 1):
             weight = comb * _power(self._rising, j) * _power(self._falling, degree - j)
-            total += weight[:, None] * coefficients[j, self.piece]
+            gathered = np.take(coefficients[j], self.piece, axis=0)  # (samples, outputs)
+            if by_column:
+                for row, column in zip(total, gathered.T, strict=True):
+                    row += weight * column
+            else:
+                total += weight[:, None] * gathered
             comb *= 1.0 * (degree - j) / (j + 1.0)
-        return total.reshape(self.shape + coefficients.shape[2:])
+        values = np.ascontiguousarray(total.T) if by_column else total
+        return values.reshape(self.shape + coefficients.shape[2:])
 
 
 def _power(powers: list[np.ndarray], exponent: int) -> np.ndarray:

@@ -81,13 +81,20 @@ def direction(theta1: Any, theta2: Any) -> Vec:
 
 def direction_jacobian(theta1: Any, theta2: Any) -> tuple[Vec, Vec]:
     """Columns ∂b/∂θ1 and ∂b/∂θ2 of the unit direction b(θ); dB/dθ = r_u times these."""
+    return direction_and_jacobian(theta1, theta2)[1:]
+
+
+def direction_and_jacobian(theta1: Any, theta2: Any) -> tuple[Vec, Vec, Vec]:
+    """The unit direction b(θ) (the values :func:`direction` gives) and the columns ∂b/∂θ1
+    and ∂b/∂θ2, from one evaluation of the sines and cosines."""
     m = _math(theta1)
     c1, s1, c2, s2 = m.cos(theta1), m.sin(theta1), m.cos(theta2), m.sin(theta2)
     u = (c1 * s2, -s1 * c2, c1 * c2)
     norm = m.sqrt(dot(u, u))
     b = scale(u, 1.0 / norm)
     du = ((-s1 * s2, -c1 * c2, -s1 * c2), (c1 * c2, s1 * s2, -c1 * s2))
-    return tuple(scale(add(d, scale(b, -dot(b, d))), 1.0 / norm) for d in du)  # type: ignore[return-value]
+    j1, j2 = (scale(add(d, scale(b, -dot(b, d))), 1.0 / norm) for d in du)
+    return b, j1, j2
 
 
 def frames(theta1: Any, theta2: Any) -> tuple[tuple[Vec, Vec, Vec], tuple[Vec, Vec, Vec]]:
@@ -135,8 +142,12 @@ def angular_velocity(columns: tuple[Vec, Vec, Vec], column_rates: tuple[Vec, Vec
 
 def singularity_margin(theta1: Any, theta2: Any) -> Any:
     """Smallest singular value of ∂b/∂θ (dB/dθ over r_u): 1 at θ = 0, 0 at a singularity."""
-    m = _math(theta1)
-    j1, j2 = direction_jacobian(theta1, theta2)
+    return jacobian_margin(*direction_jacobian(theta1, theta2))
+
+
+def jacobian_margin(j1: Vec, j2: Vec) -> Any:
+    """:func:`singularity_margin` from the columns ∂b/∂θ1 and ∂b/∂θ2."""
+    m = _math(j1[0])
     a, b, c = dot(j1, j1), dot(j1, j2), dot(j2, j2)
     half_sum, half_diff = (a + c) / 2, (a - c) / 2
     # smaller eigenvalue of [[a, b], [b, c]] as det / larger one: no cancellation near 0
@@ -193,6 +204,16 @@ def platform_jacobian(q: np.ndarray, r_u: float) -> np.ndarray:
     """dB/dθ, shape (N, 3, 2), m/rad."""
     j1, j2 = direction_jacobian(*_angles(q))
     return np.stack([_stack(j1), _stack(j2)], axis=-1) * r_u
+
+
+def motion_directions(q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For joint angles q (N, 2), rad, moving at q̇ (N, 2), rad/s: the platform's unit
+    directions (N, 3), their rates (N, 3), 1/s, and the singularity margins (N,), from one
+    evaluation of the Jacobian (the values of :func:`forward_kinematics` at r_u = 1,
+    ``contour.direction_rates`` and :func:`singularity_margins`)."""
+    (rate1, rate2), (b, j1, j2) = _angles(qd), direction_and_jacobian(*_angles(q))
+    rates = add(scale(j1, rate1), scale(j2, rate2))
+    return _stack(b), _stack(rates), jacobian_margin(j1, j2)
 
 
 def platform_frames(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

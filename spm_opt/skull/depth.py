@@ -50,9 +50,18 @@ def depth_profile(
     """The depth along joint angles q (N, 2), rad, and rates q̇ (N, 2), rad/s, at times t
     (N,), s, over the inner surface's smooth radius ``inner`` and the margin, m."""
     directions = kinematics.forward_kinematics(q, 1.0)
-    speed = inner.rate(directions, direction_rates(q, qd))
-    acceleration = np.gradient(speed, t) if len(t) > 1 else np.zeros_like(speed)
+    speed, acceleration = depth_rates(inner, t, directions, direction_rates(q, qd))
     return DepthProfile(inner.radius(directions) + margin, speed, acceleration)
+
+
+def depth_rates(
+    inner: SmoothRadius, t: np.ndarray, directions: np.ndarray, rates: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The depth's speed (N,), m/s, and acceleration (N,), m/s², of :func:`depth_profile`,
+    along unit directions (N, 3) moving at ``rates`` (N, 3), 1/s, at times t (N,), s."""
+    speed = inner.rate(directions, rates)
+    acceleration = np.gradient(speed, t) if len(t) > 1 else np.zeros_like(speed)
+    return speed, acceleration
 
 
 def depth_setpoint(

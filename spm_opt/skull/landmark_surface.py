@@ -48,7 +48,7 @@ class LandmarkSurface:
     def radius(self, directions: np.ndarray) -> np.ndarray:
         """Radius (N,), m, of the surface along unit directions (N, 3)."""
         p = np.atleast_2d(np.asarray(directions, dtype=float))
-        return self._radius(p, np.linalg.norm(p[:, None, :] - self.centres, axis=2))
+        return self._radius(p, _lengths(p[:, None, :] - self.centres))
 
     def _radius(self, p: np.ndarray, distance: np.ndarray) -> np.ndarray:
         """The radius at unit directions p (N, 3) from their distances (N, n) to the
@@ -59,9 +59,16 @@ class LandmarkSurface:
         """Radius (N,), m, and its gradient on the unit sphere (N, 3), m/rad."""
         p = np.atleast_2d(np.asarray(directions, dtype=float))
         offsets = p[:, None, :] - self.centres
-        distance = np.linalg.norm(offsets, axis=2)
+        distance = _lengths(offsets)
         radius = self._radius(p, distance)
         gradient = np.einsum("nk,nki->ni", 3.0 * distance * self.weights, offsets)
         gradient += self.linear[1:] @ self.tangents
         gradient -= np.einsum("ni,ni->n", gradient, p)[:, None] * p
         return radius, gradient
+
+
+def _lengths(offsets: np.ndarray) -> np.ndarray:
+    """Lengths (N, n) of offsets (N, n, 3): ``np.linalg.norm(offsets, axis=2)`` to the bit
+    (the same squares summed in the same order), without its slow reduction over three."""
+    x, y, z = offsets[..., 0], offsets[..., 1], offsets[..., 2]
+    return np.sqrt(x * x + y * y + z * z)
