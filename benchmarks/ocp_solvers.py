@@ -29,8 +29,14 @@ from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.limits import planner_bounds
-from spm_opt.planners import nlp_library, ocp
-from spm_opt.planners.ocp_transcription import STATE, interval_function
+from spm_opt.model.joint_torque import range_key
+from spm_opt.planners.ocp import ipopt, nlp_library
+from spm_opt.planners.ocp.bounds import nlp_bounds
+from spm_opt.planners.ocp.diagnostics import interval_rows
+from spm_opt.planners.ocp.guess import initial_guess
+from spm_opt.planners.ocp.nlp import build_nlp
+from spm_opt.planners.ocp.parameters import arcs, nlp_parameters
+from spm_opt.planners.ocp.transcription import STATE, default_fractions, interval_function
 
 
 def stagewise(
@@ -46,12 +52,12 @@ def stagewise(
     grid = nlp.grid
     m, d, segments = grid.intervals, 3 * grid.segments, grid.segments
     interval = interval_function(nlp.checks, False, None, 0)
-    arcs, dynamics = ocp._arcs(problem), np.zeros(0)  # no torque rows: no robot input
+    segment_arcs, dynamics = arcs(problem), np.zeros(0)  # no torque rows: no robot input
     states0, jerks0, durations0 = grid.split(x0)
     states_low, jerks_low, durations_low = grid.split(box["lbx"])
     states_high, jerks_high, durations_high = grid.split(box["ubx"])
-    rows_low = ocp._interval_rows(nlp, box["lbg"])[:, STATE:]
-    rows_high = ocp._interval_rows(nlp, box["ubg"])[:, STATE:]
+    rows_low = interval_rows(nlp, box["lbg"])[:, STATE:]
+    rows_high = interval_rows(nlp, box["ubg"])[:, STATE:]
     phases = grid.phase_of_interval
     x = [ca.MX.sym(f"x{k}", STATE + d) for k in range(m + 1)]
     u = [ca.MX.sym(f"u{k}", 2) for k in range(m)]
@@ -62,7 +68,7 @@ def stagewise(
         phase = int(phases[k])
         h = durations[phase] / grid.counts[phase % 3]
         end, rows, integrals = interval(
-            state, u[k], h, arcs[grid.interval_segments[k]], fractions[:, k], dynamics
+            state, u[k], h, segment_arcs[grid.interval_segments[k]], fractions[:, k], dynamics
         )
         g.append(x[k + 1] - ca.vertcat(end, durations))
         lbg += [0.0] * (STATE + d)
@@ -129,24 +135,29 @@ def main() -> None:
     problem = so.load_problem(args.problem)
     planner = so.PLANNERS["ocp-min-time"]
     settings = planner.settings(problem)
-    joint_range = ocp.range_key(problem.robot.joint_range)
-    nlp = ocp._nlp(len(problem.segment_durations), settings, False, joint_range, frozenset())
+    joint_range = range_key(problem.robot.joint_range)
+    nlp = build_nlp(len(problem.segment_durations), settings, False, joint_range, frozenset())
     grid = nlp.grid
     start = so.plan(problem, "toppra")
-    x0 = ocp._guess(problem, grid, np.diff(start.metadata["landmark_times_s"]), start)
-    fractions = np.tile(ocp.default_fractions(nlp.checks)[:, None], grid.intervals)
+    x0 = initial_guess(problem, grid, np.diff(start.metadata["landmark_times_s"]), start)
+    fractions = np.tile(default_fractions(nlp.checks)[:, None], grid.intervals)
     weights = [settings.time_weight, settings.energy_weight, settings.jerk_weight]
-    terms = nlp.terms(x0, ocp._parameters(problem, fractions, weights, np.ones(3), False))
+    terms = nlp.terms(x0, nlp_parameters(problem, fractions, weights, np.ones(3), False))
     scales = np.maximum(np.abs([float(v) for v in terms]), 1e-9)
-    box = ocp._bounds(
+    box = nlp_bounds(
         problem, nlp, planner_bounds(problem, settings.margin), "free", grid.split(x0)[2]
     )
-    ipopt = {"print_level": 0, "sb": "yes", "mu_strategy": "adaptive", "tol": settings.tolerance}
-    global_form = ocp._solver(
+    ipopt_options = {
+        "print_level": 0,
+        "sb": "yes",
+        "mu_strategy": "adaptive",
+        "tol": settings.tolerance,
+    }
+    global_form = ipopt.solver(
         len(problem.segment_durations), settings, False, joint_range, frozenset(), warm=False
     )
     nlp_library.wait_for_builds()
-    parameters = ocp._parameters(problem, fractions, weights, scales, False)
+    parameters = nlp_parameters(problem, fractions, weights, scales, False)
     d = 3 * grid.segments
     results = [
         time_solver(
@@ -163,7 +174,7 @@ def main() -> None:
     results.append(
         time_solver(
             "IPOPT, stage-wise NLP",
-            ca.nlpsol("s", "ipopt", form, {**base, "ipopt": ipopt}),
+            ca.nlpsol("s", "ipopt", form, {**base, "ipopt": ipopt_options}),
             data,
             args.repeats,
             carried,

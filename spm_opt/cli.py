@@ -815,7 +815,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _second_interrupt_ends() -> None:
     """Let a second Ctrl-C end the process at once: the exit may wait for a compile the
-    interrupted planner started (:mod:`spm_opt.planners.nlp_library`)."""
+    interrupted planner started (:mod:`spm_opt.planners.ocp.nlp_library`)."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_DFL)
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from spm_opt.model import compiled
-from spm_opt.planners import nlp_library
-from spm_opt.planners.nlp_library import COMPILED, INTERPRETED, LOADED, nlp_solver
+from spm_opt.planners.ocp import nlp_library
+from spm_opt.planners.ocp.nlp_library import COMPILED, INTERPRETED, LOADED, nlp_solver
 
 OPTIONS = {"ipopt": {"print_level": 0, "sb": "yes"}, "print_time": False, "calc_lam_p": False}
 ARGUMENTS = {"x0": [0.0, 0.0], "p": [1.0, 100.0], "lbg": -np.inf, "ubg": 1.5}

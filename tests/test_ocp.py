@@ -1,5 +1,10 @@
-"""The optimal-control planners: plans the evaluator finds within every limit, and clear
-errors for limits no plan can meet."""
+"""The optimal-control planners: plans within every limit, and clear errors for limits no
+plan can meet.
+
+The planners return a plan only once the evaluator finds it clean, so the plans are checked
+here by the tests' own measure instead (:mod:`plan_checks`: finite differences of the
+sampled joint angles against the problem's limits); the evaluator is asked only for what
+it alone measures (effort, jerk, the lower bound, the other planners' plans)."""
 
 import dataclasses
 from pathlib import Path
@@ -7,12 +12,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
+from plan_checks import assert_within_limits
 
 import spm_opt as so
 from spm_opt.model import dynamics
+from spm_opt.model.joint_torque import dynamics_parameters, load_torque
 from spm_opt.model.params import MM
 from spm_opt.planners import get_planner
-from spm_opt.planners.ocp import dynamics_parameters, load_torque
 from spm_opt.sweep.spec import load_sweep_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
@@ -28,10 +34,9 @@ def min_time(paper_problem):
 
 
 def test_min_time_meets_every_limit_on_the_contour(paper_problem, min_time):
-    report = so.evaluate(paper_problem, min_time)
-    assert report.violations == []
-    assert report.max_contour_deviation_mm <= 0.1
-    assert report.max_landmark_error_mm < 0.01
+    """Within every limit, inside the tube (0.1 mm less the 0.03 mm execution reserve), and
+    through every landmark within 0.01 mm."""
+    assert_within_limits(paper_problem, min_time, landmark_tolerance=0.01 * MM)
     assert min_time.metadata["statistics"]["status"] == "Solve_Succeeded"
 
 
@@ -45,8 +50,9 @@ def test_min_time_is_near_the_lower_bound(paper_problem, min_time):
 
 def test_plan_records_solver_statistics(min_time):
     statistics = min_time.metadata["statistics"]
-    for key in ("status", "iterations", "solve_time_s", "constraint_violation", "most_binding"):
+    for key in ("status", "iterations", "solve_time_s", "constraint_violation", "rows"):
         assert key in statistics
+    assert statistics["transcription"] == "path"
     assert statistics["constraint_violation"] < 1e-6
     assert len(min_time.metadata["landmark_times_s"]) == 5
 
@@ -55,13 +61,14 @@ def test_warm_start_from_a_solved_plan(paper_problem, min_time):
     """Seeded with its own solution, the planner keeps (or improves) it."""
     again = get_planner("ocp-min-time").plan(paper_problem, warm_start=min_time)
     assert again.duration <= min_time.duration * (1 + 1e-3)
-    assert so.evaluate(paper_problem, again).violations == []
+    assert_within_limits(paper_problem, again)
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="since the planners keep a feed hold's room, which depends on the tool-speed "
-    "limit, the faster problem's bounds differ too: 61 iterations continued against 60 cold",
+    reason="IPOPT's warm start saves little: in path coordinates 23 iterations continued "
+    "against 28 cold (in the time domain, with the feed hold's room, which depends on the "
+    "tool-speed limit, 61 against 60)",
 )
 def test_a_similar_problem_continues_from_a_plans_solution(paper_problem, min_time):
     """A faster tool (another problem, the NLP of the same shape) starts from the plan's
@@ -70,27 +77,34 @@ def test_a_similar_problem_continues_from_a_plans_solution(paper_problem, min_ti
     continued = so.plan(faster, "ocp-min-time", warm_start=min_time)
     cold = so.plan(faster, "ocp-min-time")
     assert continued.metadata["statistics"]["start"] == "solution"
-    assert cold.metadata["statistics"]["start"] == "motion"
-    assert so.evaluate(faster, continued).violations == []
+    assert cold.metadata["statistics"]["start"] == "speed limits"
+    assert_within_limits(faster, continued)
     iterations = [p.metadata["statistics"]["iterations"] for p in (continued, cold)]
     assert iterations[0] < 0.6 * iterations[1]
     assert continued.duration == pytest.approx(cold.duration, rel=1e-3)
     assert continued.duration < 0.95 * min_time.duration
 
 
-def test_an_acceptable_level_stop_is_solved_again_strictly(paper_problem, min_time):
+TIME_DOMAIN = {"transcription": "time", "nodes_per_phase": 10}
+"""``ocp-min-time`` in the time domain (its grid there), where IPOPT may stop at its
+acceptable level."""
+
+
+def test_an_acceptable_level_stop_is_solved_again_strictly(paper_problem):
     """IPOPT forced to stop at its loose "acceptable" level after one such iteration
     (CasADi calls that a success): the planner continues from there to a converged
     solve, and the plan is the one a plain solve finds."""
+    plain = dataclasses.replace(paper_problem, planner_options={"ocp-min-time": TIME_DOMAIN})
     problem = dataclasses.replace(
-        paper_problem, planner_options={"ocp-min-time": {"acceptable_iterations": 1}}
+        paper_problem,
+        planner_options={"ocp-min-time": {**TIME_DOMAIN, "acceptable_iterations": 1}},
     )
     plan = so.plan(problem, "ocp-min-time")
     statistics = plan.metadata["statistics"]
     assert statistics["statuses"][:2] == ["Solved_To_Acceptable_Level", "Solve_Succeeded"]
     assert statistics["status"] == "Solve_Succeeded"
-    assert plan.duration == pytest.approx(min_time.duration, rel=1e-6)
-    assert so.evaluate(problem, plan).violations == []
+    assert plan.duration == pytest.approx(so.plan(plain, "ocp-min-time").duration, rel=1e-6)
+    assert_within_limits(problem, plan)
 
 
 def test_an_acceptable_level_stop_that_cannot_be_made_strict_is_an_error(
@@ -98,12 +112,13 @@ def test_an_acceptable_level_stop_that_cannot_be_made_strict_is_an_error(
 ):
     """The strict re-solve given one iteration: no plan, but the statuses and the most
     violated row."""
-    from spm_opt.planners import ocp
+    from spm_opt.planners.ocp import ipopt
 
-    monkeypatch.setitem(ocp._WARM_START, "max_iter", 1)
-    monkeypatch.setattr(ocp, "_solver", ocp._solver.__wrapped__)  # no cached solver without it
+    monkeypatch.setitem(ipopt.WARM_START, "max_iter", 1)
+    monkeypatch.setattr(ipopt, "solver", ipopt.solver.__wrapped__)  # no cached solver without it
     problem = dataclasses.replace(
-        paper_problem, planner_options={"ocp-min-time": {"acceptable_iterations": 1}}
+        paper_problem,
+        planner_options={"ocp-min-time": {**TIME_DOMAIN, "acceptable_iterations": 1}},
     )
     with pytest.raises(
         so.PlanningError,
@@ -124,9 +139,7 @@ def test_limits_exceeded_between_constraint_points_are_solved_again(paper_proble
     plan = so.plan(problem, "ocp-min-jerk")
     statistics = plan.metadata["statistics"]
     assert statistics["refinements"] >= 1
-    report = so.evaluate(paper_problem, plan)
-    assert report.violations == []
-    assert report.max_contour_deviation_mm <= 0.1
+    assert_within_limits(paper_problem, plan)
 
 
 def test_tool_speed_too_low_for_the_total_duration(paper_problem):
@@ -174,10 +187,9 @@ def test_bad_settings_are_one_line_errors(paper_problem, options, message):
 @pytest.mark.parametrize("name", ["craniotomy_large_flap", "craniotomy_five_landmarks"])
 def test_min_time_on_other_flaps(name):
     problem = so.load_problem(PROBLEMS / f"{name}.toml")
-    report = so.evaluate(problem, so.plan(problem, "ocp-min-time"))
-    assert report.violations == []
-    assert report.max_landmark_error_mm < 0.01
-    assert 1.0 < report.duration_over_lower_bound < 1.02
+    plan = so.plan(problem, "ocp-min-time")
+    assert_within_limits(problem, plan, landmark_tolerance=0.01 * MM)
+    assert 1.0 < so.evaluate(problem, plan).duration_over_lower_bound < 1.02
 
 
 SHIPPED = sorted(path.stem for path in PROBLEMS.glob("*.toml"))
@@ -189,22 +201,21 @@ def test_min_time_is_never_longer_than_toppra(name):
     contour: the optimal-control plan is at most as long, and clean."""
     problem = so.load_problem(PROBLEMS / f"{name}.toml")
     plan = so.plan(problem, "ocp-min-time")
-    assert so.evaluate(problem, plan).violations == []
+    assert_within_limits(problem, plan)
     assert plan.duration <= so.plan(problem, "toppra").duration
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", SHIPPED)
 def test_min_energy_has_the_least_effort_of_the_clean_plans(name):
-    """On every shipped problem, ∫τᵀτ dt of the minimum-energy plan is the least of every
-    planner's clean plan (each judged by the evaluator, durations free as each planner
-    takes them)."""
+    """On every shipped problem, ∫τᵀτ dt of the minimum-energy plan, within every limit, is
+    the least of every planner's clean plan (each judged by the evaluator, durations free as
+    each planner takes them)."""
     problem = so.load_problem(PROBLEMS / f"{name}.toml")
-    efforts = {}
-    for planner in so.PLANNERS:
-        report = so.evaluate(problem, so.plan(problem, planner))
-        if not report.violations:
-            efforts[planner] = report.effort_n2m2s
+    plans = {planner: so.plan(problem, planner) for planner in so.PLANNERS}
+    assert_within_limits(problem, plans["ocp-min-energy"])
+    reports = {planner: so.evaluate(problem, plan) for planner, plan in plans.items()}
+    efforts = {planner: r.effort_n2m2s for planner, r in reports.items() if not r.violations}
     assert "ocp-min-energy" in efforts
     assert efforts["ocp-min-energy"] == min(efforts.values())
 
@@ -224,14 +235,12 @@ def test_min_energy_has_the_least_effort_of_the_clean_plans(name):
 def test_fixed_time_and_mixed_planners_on_other_flaps(name, planner):
     problem = so.load_problem(PROBLEMS / f"{name}.toml")
     plan = so.plan(problem, planner)
-    report = so.evaluate(problem, plan)
-    assert report.violations == []
-    assert report.max_landmark_error_mm < 0.01
+    assert_within_limits(problem, plan, landmark_tolerance=0.01 * MM)
     total = problem.segment_durations.sum()
     if planner == "ocp-min-jerk":  # the mix frees the total, minimum energy bounds it
-        assert report.duration_s == pytest.approx(total)
+        assert plan.duration == pytest.approx(total)
     elif planner == "ocp-min-energy":
-        assert report.duration_s <= total * (1 + 1e-6)
+        assert plan.duration <= total * (1 + 1e-6)
 
 
 def jerk_integral(report):
@@ -251,8 +260,8 @@ def test_min_energy_beats_the_others_on_its_own_objective(
     """Within the paper's 40 s (its duration free up to the problem's total) and inside
     every limit the baseline breaks, with less ∫τᵀτ dt than the baseline and than the
     minimum-time plan (gravity holding dominates: a shorter cut costs less effort)."""
+    assert_within_limits(paper_problem, min_energy)
     report = so.evaluate(paper_problem, min_energy)
-    assert report.violations == []
     assert report.duration_s <= 40.0 * (1 + 1e-6)  # the total duration: an IPOPT row
     assert report.effort_n2m2s < 0.8 * so.evaluate(paper_problem, baseline).effort_n2m2s
     assert report.effort_n2m2s <= so.evaluate(paper_problem, min_time).effort_n2m2s
@@ -265,10 +274,9 @@ def test_min_jerk_is_the_smoothest_plan_within_the_limits(paper_problem, min_ene
     leaves the 0.1 mm tube by 7 mm and starts and ends with steps in acceleration, which
     the evaluator reports as violations.)"""
     plan = so.plan(paper_problem, "ocp-min-jerk")
+    assert_within_limits(paper_problem, plan, landmark_tolerance=0.01 * MM)
     report = so.evaluate(paper_problem, plan)
-    assert report.violations == []
     assert report.duration_s == pytest.approx(40.0)
-    assert report.max_landmark_error_mm < 0.01
     other = so.evaluate(paper_problem, min_energy)
     assert jerk_integral(report) < 0.5 * jerk_integral(other)
 
@@ -300,11 +308,12 @@ def random_flap(sweep: str, planner: str, flap: int) -> so.Problem:
 )
 def test_flaps_that_once_failed_are_clean(sweep, planner, flap):
     problem = random_flap(sweep, planner, flap)
-    report = so.evaluate(problem, so.plan(problem, planner))
-    assert report.violations == []
+    plan = so.plan(problem, planner)
+    assert_within_limits(problem, plan)
     # against 0.22 and 0.30 mm once: 1.24e-6 mm on flap 10 since the skull is the smooth
-    # surface through the flap's landmarks (their radii rounded to 0.01 mm)
-    assert report.max_backtrack_mm <= 1e-5
+    # surface through the flap's landmarks (their radii rounded to 0.01 mm); a bound finer
+    # than the check's one encoder count (1.2e-3 mm)
+    assert so.evaluate(problem, plan).max_backtrack_mm <= 1e-5
 
 
 def test_the_nlp_torque_is_the_actuators_joint_side_torque_with_drive_friction():

@@ -6,9 +6,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from spm_opt.planners import ocp
-from spm_opt.planners.ocp_assembly import assemble, interval_functions
-from spm_opt.planners.ocp_transcription import ARC_PARAMETERS, ON_DEMAND, STATE, Grid
+from spm_opt.model.joint_torque import range_key
+from spm_opt.planners.ocp import nlp
+from spm_opt.planners.ocp.assembly import assemble, interval_functions
+from spm_opt.planners.ocp.constraints import ON_DEMAND
+from spm_opt.planners.ocp.parameters import nlp_parameters
+from spm_opt.planners.ocp.point import ARC_PARAMETERS
+from spm_opt.planners.ocp.transcription import STATE, Grid
 
 
 def plain_nlp(grid: Grid, interval: ca.Function, checks: int, n_dynamics: int) -> dict:
@@ -42,8 +46,8 @@ def plain_nlp(grid: Grid, interval: ca.Function, checks: int, n_dynamics: int) -
 @pytest.mark.parametrize(("with_torque", "demanded"), [(False, frozenset()), (True, ON_DEMAND)])
 def test_assembled_derivatives_are_casadis(paper_problem, with_torque, demanded):
     checks, grid = 2, Grid(len(paper_problem.segment_durations), (2, 3, 2))
-    joint_range = ocp.range_key(paper_problem.robot.joint_range)
-    interval = ocp._interval(checks, with_torque, joint_range, demanded)
+    joint_range = range_key(paper_problem.robot.joint_range)
+    interval = nlp.interval(checks, with_torque, joint_range, demanded)
     n_dynamics = interval.size1_in(5)
     assembled = assemble(grid, interval_functions(interval), ARC_PARAMETERS, checks, n_dynamics)
     plain = plain_nlp(grid, interval, checks, n_dynamics)
@@ -53,7 +57,7 @@ def test_assembled_derivatives_are_casadis(paper_problem, with_torque, demanded)
     x = 0.1 * rng.standard_normal(n)
     x[-3 * grid.segments :] = rng.uniform(0.5, 2.0, 3 * grid.segments)
     fractions = rng.uniform(0.1, 0.9, (checks, grid.intervals))
-    p = ocp._parameters(paper_problem, fractions, [0.7, 1.3, 0.4], [40.0, 0.6, 0.2], with_torque)
+    p = nlp_parameters(paper_problem, fractions, [0.7, 1.3, 0.4], [40.0, 0.6, 0.2], with_torque)
     lam_f, lam_g = 0.8, rng.standard_normal(n_g)
 
     sigma, lam = ca.MX.sym("sigma"), ca.MX.sym("lam", n_g)

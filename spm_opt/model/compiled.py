@@ -12,8 +12,8 @@ samples. Without a C compiler :func:`compile_batch` returns ``None`` and callers
 CasADi's interpreter.
 
 The compiler lookup, the cache directory and the atomic build (:func:`compiler`,
-:func:`cache_directory`, :func:`build_library`) serve :mod:`spm_opt.planners.nlp_library`
-too.
+:func:`cache_directory`, :func:`build_library`) serve
+:mod:`spm_opt.planners.ocp.nlp_library` too.
 """
 
 from __future__ import annotations

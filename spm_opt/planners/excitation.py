@@ -28,7 +28,7 @@ symbolic model as every planner's, solved by IPOPT (limited-memory Hessian; its
 20 coefficients are few): the joint range (hard, :data:`RANGE_CLEARANCE_RAD` inside it),
 the singularity margin, the joint speed, acceleration and jerk less ``margin`` and the
 actuator torque (the optimal-control planners' joint side torque,
-:func:`spm_opt.planners.ocp.load_torque`) imposed at the grid points. The Coulomb column
+:func:`spm_opt.model.joint_torque.load_torque`) imposed at the grid points. The Coulomb column
 is smoothed by tanh(q̇/:data:`COULOMB_SMOOTHING_RAD_S`) for the design only.
 
 The plan ignores the contour: its metadata say so (``ignores_contour``) and the evaluator
@@ -52,6 +52,7 @@ from spm_opt.interrupt import solve
 from spm_opt.limits import planner_bounds
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
+from spm_opt.model.joint_torque import dynamics_parameters, load_torque, range_key
 from spm_opt.model.regressor import (
     DRIVE_PARAMETERS,
     DRIVE_TERMS,
@@ -59,7 +60,6 @@ from spm_opt.model.regressor import (
     drive_columns,
     link_function,
 )
-from spm_opt.planners.ocp import dynamics_parameters, load_torque, range_key
 from spm_opt.planners.registry import planner_options, register, settings_from_options
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory

@@ -34,7 +34,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sparse
 
-from spm_opt.planners.ocp_transcription import CONTROL, STATE, Grid
+from spm_opt.planners.ocp.transcription import CONTROL, STATE, Grid
 
 Z = STATE + CONTROL + 1
 """An interval's variables: its node state (q, q̇, q̈), its jerk and its length h."""
@@ -44,7 +44,7 @@ VALUE, JACOBIAN, HESSIAN = "interval_value", "interval_jacobian", "interval_hess
 
 def interval_functions(interval: ca.Function) -> list[ca.Function]:
     """The interval's value, Jacobian and Lagrangian Hessian from ``interval``
-    (:func:`~spm_opt.planners.ocp_transcription.interval_function`), in SX.
+    (:func:`~spm_opt.planners.ocp.transcription.interval_function`), in SX.
 
     All take z (9), the arc, the check fractions, the dynamics parameters and c (2): the
     objective's weights of ∫jerk² and ∫τᵀτ. Value: the interval's rows [−end; limit rows]

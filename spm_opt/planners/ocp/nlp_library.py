@@ -1,7 +1,7 @@
 """NLP solvers whose functions run as compiled C from a shared library cached on disk.
 
 The NLP is made of a few small functions (the optimal-control NLP: one interval's value,
-Jacobian and Hessian, :mod:`spm_opt.planners.ocp_assembly`) and an ``assemble`` step that
+Jacobian and Hessian, :mod:`spm_opt.planners.ocp.assembly`) and an ``assemble`` step that
 builds the NLP and its derivative functions from them, in SX or compiled alike.
 :func:`nlp_solver` takes a cheap ``key`` for those functions (the caller's: e.g. a hash of
 the code that builds them) and adds what else makes the binary: CasADi's version, the

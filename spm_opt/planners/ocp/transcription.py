@@ -1,42 +1,37 @@
 """The optimal-control planners' transcription: the time grid, the motion on one interval,
-and the constraints, each with its name, unit, places and bounds in one list.
+and the interval's function that holds every constraint row of
+:data:`~spm_opt.planners.ocp.constraints.LIMITS`.
 
 Each segment between consecutive landmark visits is three phases (a short one at each end,
 the middle between them) of uniform intervals; the phase durations are variables. The
 state is (q, q̇, q̈) and the control is the jerk, constant on each interval, so the motion is
-integrated exactly: q is a cubic in time on each interval.
-
-Every constraint is a row (or rows) of one interval's function, evaluated at some of its
-places: the node that starts it, check points inside it at fractions that are parameters
-(so the planner can move them to where a limit was exceeded without changing the NLP's
-shape), its two Gauss points, or, for the joint speed, the middle Bernstein coefficient of q̇ (q̇ is
-quadratic on an interval: its node values and this coefficient bound it everywhere on the
-interval, exactly). :data:`CONSTRAINTS` is the one list: adding a constraint is one entry,
-and the NLP's rows, their bounds and the planner's report of the most violated one all read
-it.
+integrated exactly: q is a cubic in time on each interval, and the returned
+:class:`~spm_opt.trajectory.Trajectory` reproduces the solution exactly. Landmarks are
+reached exactly at phase boundaries; the motion starts and ends at rest.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from spm_opt.limits import PlannerBounds
-from spm_opt.model import kinematics
-from spm_opt.model.params import MM
-from spm_opt.skull.arc_fit import ACROSS_DEGREE, ALONG_DEGREE, COEFFICIENTS
+from spm_opt.planners.ocp.constraints import LIMITS, Constraint, Limit
+from spm_opt.planners.ocp.point import (
+    ARC_PARAMETERS,
+    GAUSS,
+    GAUSS_FRACTIONS,
+    INSIDE,
+    NODE,
+    SPEED_CONTROL,
+    Point,
+)
 from spm_opt.trajectory import Trajectory
 
-UNLIMITED = 1e3
-"""Stands in for a limit the problem leaves open (in the limit's SI unit)."""
-ARC_PARAMETERS = 15 + COEFFICIENTS
-"""Per segment: the arc's a, w, n, n × end (3 each), and the skull's radius near it
-(:mod:`spm_opt.skull.arc_fit`): φ_c, φ_h (rad), o_h, and the coefficients C_kj (mm)."""
 CORNER_SHARE = 0.05
 """Share of a segment's duration each corner phase takes in a contour-following guess."""
 STATE, CONTROL = 6, 2
@@ -53,223 +48,20 @@ def advance(x: Any, u: Any, h: Any) -> Any:
     )
 
 
-class Point:
-    """The motion at one place of an interval, with the quantities the constraints share
-    (SX expressions, built once when first asked for).
-
-    ``arc`` holds the segment's great circle (:data:`ARC_PARAMETERS`, lengths in mm, so
-    that the squared path rows are near 1); ``torque`` maps (q, q̇, q̈) to the joint side
-    of the actuators' torque (the load's, the drives' inertia and friction), N·m.
-    """
-
-    def __init__(self, state: ca.SX, arc: ca.SX, torque: Callable[..., ca.SX]) -> None:
-        self.q, self.qd, self.qdd = state[0:2], state[2:4], state[4:6]
-        self._arc, self._torque = arc, torque
-
-    @cached_property
-    def _geometry(self) -> dict[str, ca.SX]:
-        arc = self._arc
-        a, w, n, w_end = (arc[3 * k : 3 * k + 3] for k in range(4))
-        p = ca.vertcat(*kinematics.direction(self.q[0], self.q[1]))
-        d1, d2 = kinematics.direction_jacobian(self.q[0], self.q[1])
-        p_dot = ca.vertcat(*d1) * self.qd[0] + ca.vertcat(*d2) * self.qd[1]
-        pa, pw = ca.dot(p, a), ca.dot(p, w)
-        off_plane = ca.dot(p, n)
-        angle_rate = (ca.dot(p_dot, w) * pa - pw * ca.dot(p_dot, a)) / (pa**2 + pw**2)
-        on_arc, rho, along_slope, across_slope = _RADIUS(arc[12:], ca.atan2(pw, pa), off_plane)
-        rho_rate = along_slope * angle_rate + across_slope * ca.dot(p_dot, n)
-        return {
-            "tool speed²": ca.sumsqr(p_dot) * rho**2 + rho_rate**2,
-            # |ρ p − ρ_c c|², c the point of the arc's plane nearest p (Contour.distance)
-            "chord²": (rho - on_arc) ** 2 + 2 * rho * on_arc * (1 - ca.sqrt(1 - off_plane**2)),
-            "progress speed": on_arc * angle_rate,
-            "past start": pw,
-            "before end": -ca.dot(p, w_end),
-        }
-
-    def __getitem__(self, name: str) -> ca.SX:
-        return self._geometry[name]
-
-    @cached_property
-    def torque(self) -> ca.SX:
-        """The joint side of the actuators' torque, N·m (2,)."""
-        return self._torque(self.q, self.qd, self.qdd)
-
-
-def _radius_function() -> ca.Function:
-    """The skull's radius (mm) near an arc, from its fit's parameters (φ_c, φ_h, o_h, C_kj)
-    at the angle φ along it and the off-plane component o: on the arc (o = 0), at the point
-    itself, and the latter's partial derivatives in φ and o."""
-    fit = ca.SX.sym("fit", 3 + COEFFICIENTS)
-    along, off = ca.SX.sym("along"), ca.SX.sym("off")
-    x, y = (along - fit[0]) / fit[1], off / fit[2]
-    coefficients = fit[3:]
-    chebyshev = [1, x]
-    for _ in range(ALONG_DEGREE - 1):
-        chebyshev.append(2 * x * chebyshev[-1] - chebyshev[-2])
-    across = [
-        sum(
-            chebyshev[k] * coefficients[k * (ACROSS_DEGREE + 1) + j]
-            for k in range(ALONG_DEGREE + 1)
-        )
-        for j in range(ACROSS_DEGREE + 1)
-    ]
-    rho = sum(term * y**j for j, term in enumerate(across))
-    outputs = [across[0], rho, ca.jacobian(rho, along), ca.jacobian(rho, off)]
-    return ca.Function("skull_radius", [fit, along, off], outputs)
-
-
-_RADIUS = _radius_function()
-
-
-NODE, INSIDE, GAUSS, SPEED_CONTROL = "node", "inside", "Gauss point", "speed control point"
-"""The places of an interval where constraints apply: the node that starts it, the check
-points inside it, its two Gauss–Legendre points, and q̇'s middle Bernstein coefficient."""
-GAUSS_FRACTIONS = (0.5 - 3**0.5 / 6, 0.5 + 3**0.5 / 6)
-"""The two-point Gauss–Legendre rule's places in an interval, as fractions of it: where the
-effort integral and the torque limit read the torque (two table look-ups an interval, and
-exact for cubics, as Simpson's three)."""
-
-
-@dataclass(frozen=True)
-class Constraint:
-    """One kind of constraint row.
-
-    Attributes
-    ----------
-    name : str
-        What it limits, in the evaluator's words.
-    unit : str
-        Unit of the rows (of their square root when ``squared``).
-    squared : bool
-        Whether the rows hold the square of the quantity.
-    places : tuple of str
-        Where on each interval it applies (:data:`NODE`, :data:`INSIDE`, ...).
-    rows : callable
-        Point -> its rows (SX column).
-    limits : callable
-        (PlannerBounds) -> per-row lower and upper bounds, in the rows' units.
-    size : int
-        Rows per point.
-    at_landmarks : bool
-        Whether it applies at a landmark's node (where the angles are fixed anyway).
-    on_demand : tuple of str
-        Places whose rows an NLP has only once the planner found the limit exceeded
-        between the constraint points (:func:`row_groups`' ``demanded``).
-    dynamics : bool
-        Whether the rows need the dynamics (left out of NLPs without them).
-    """
-
-    name: str
-    unit: str
-    squared: bool
-    places: tuple[str, ...]
-    rows: Callable[[Point], ca.SX]
-    limits: Callable[[PlannerBounds], tuple[list[float], list[float]]]
-    size: int = 1
-    at_landmarks: bool = True
-    on_demand: tuple[str, ...] = ()
-    dynamics: bool = False
-
-    def waiting(self, place: str, demanded: frozenset[str]) -> bool:
-        """Whether its rows at ``place`` are on demand and not (yet) ``demanded``."""
-        return place in self.on_demand and self.name not in demanded
-
-
-def _tool_speed_mm(bounds: PlannerBounds) -> float:
-    return (bounds.tool_speed or UNLIMITED) / MM
-
-
-def _tolerance_mm(bounds: PlannerBounds) -> float:
-    return (bounds.contour_tolerance or UNLIMITED) / MM
-
-
-CONSTRAINTS = (
-    Constraint(
-        "tool speed",
-        "mm/s",
-        True,
-        (NODE, INSIDE),
-        lambda point: point["tool speed²"],
-        lambda bounds: ([-np.inf], [_tool_speed_mm(bounds) ** 2]),
-    ),
-    Constraint(
-        "contour deviation",
-        "mm",
-        True,
-        (NODE, INSIDE),
-        lambda point: point["chord²"],
-        lambda bounds: ([-np.inf], [_tolerance_mm(bounds) ** 2]),
-        at_landmarks=False,
-    ),
-    Constraint(
-        "segment start",
-        "",
-        False,
-        (NODE, INSIDE),
-        lambda point: point["past start"],
-        lambda bounds: ([0.0], [np.inf]),
-        at_landmarks=False,
-    ),
-    Constraint(
-        "segment end",
-        "",
-        False,
-        (NODE, INSIDE),
-        lambda point: point["before end"],
-        lambda bounds: ([0.0], [np.inf]),
-        at_landmarks=False,
-    ),
-    # the cut never runs back along its arc: the evaluator's backtracking. At the check
-    # points on demand: a minimum-energy cut on varied flap 157 slowed almost to rest
-    # mid-segment and ran 0.30 mm back between two nodes, but bounded there from the start
-    # the rows cost minimum jerk its convergence on 2 of the first 130 random flaps
-    # (300 iterations), and minimum time more iterations on 14 of 24 flaps (median 59
-    # against 50.5)
-    Constraint(
-        "backtracking",
-        "mm/s",
-        False,
-        (NODE, INSIDE),
-        lambda point: point["progress speed"],
-        lambda bounds: ([0.0], [np.inf]),
-        on_demand=(INSIDE,),
-    ),
-    Constraint(
-        "joint speed",
-        "rad/s",
-        False,
-        (SPEED_CONTROL,),
-        lambda point: point.qd,
-        lambda bounds: ([-bounds.joint_speed] * 2, [bounds.joint_speed] * 2),
-        size=2,
-    ),
-    Constraint(
-        "actuator torque",
-        "N·m",
-        False,
-        (GAUSS,),
-        lambda point: point.torque,
-        lambda bounds: ([-bounds.load_torque] * 2, [bounds.load_torque] * 2),
-        size=2,
-        dynamics=True,
-    ),
-)
-
-
-ON_DEMAND = frozenset(c.name for c in CONSTRAINTS if c.on_demand)
-"""The constraints with on-demand rows."""
-
-
 @dataclass(frozen=True)
 class RowGroup:
-    """Consecutive rows of one interval: a constraint at one point of one place."""
+    """Consecutive rows of one interval: a limit's constraint at one point of one place."""
 
+    limit: Limit
     constraint: Constraint
     place: str
     point: int  # which check point, for INSIDE
     start: int  # first row within the interval's rows
     size: int
+
+    def limits(self, bounds: PlannerBounds) -> tuple[list[float], list[float]]:
+        """Its rows' lower and upper bounds within ``bounds``, in the rows' units."""
+        return self.constraint.limits(self.limit.value(bounds))
 
 
 @dataclass(frozen=True)
@@ -350,11 +142,6 @@ def default_fractions(checks: int) -> np.ndarray:
     return np.arange(1, checks + 1) / (checks + 1)
 
 
-def constraints(with_dynamics: bool) -> tuple[Constraint, ...]:
-    """The constraints an NLP with (or without) the dynamics imposes."""
-    return tuple(c for c in CONSTRAINTS if with_dynamics or not c.dynamics)
-
-
 def _points(place: str, checks: int) -> int:
     """How many points of an interval a place has."""
     return {INSIDE: checks, GAUSS: len(GAUSS_FRACTIONS)}.get(place, 1)
@@ -363,16 +150,20 @@ def _points(place: str, checks: int) -> int:
 def row_groups(
     checks: int, with_dynamics: bool, demanded: frozenset[str] = frozenset()
 ) -> tuple[RowGroup, ...]:
-    """The rows of one interval after its continuity rows, in order; on-demand places only
-    for the constraints ``demanded``."""
+    """The rows of one interval after its continuity rows, in :data:`LIMITS`' order; the
+    rows needing the dynamics only ``with_dynamics``, on-demand places only for the
+    constraints ``demanded``."""
     groups, start = [], 0
-    for constraint in constraints(with_dynamics):
-        for place in constraint.places:
-            if constraint.waiting(place, demanded):
+    for limit in LIMITS:
+        for constraint in limit.constraints:
+            if constraint.dynamics and not with_dynamics:
                 continue
-            for point in range(_points(place, checks)):
-                groups.append(RowGroup(constraint, place, point, start, constraint.size))
-                start += constraint.size
+            for place in constraint.places:
+                if constraint.waiting(place, demanded):
+                    continue
+                for point in range(_points(place, checks)):
+                    groups.append(RowGroup(limit, constraint, place, point, start, constraint.size))
+                    start += constraint.size
     return tuple(groups)
 
 
