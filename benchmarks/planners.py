@@ -15,18 +15,27 @@ first ``load_problem`` (imports, robot file), the Lagrange dynamics model and th
 batch torque. Then, per planner, a freshly loaded problem and:
 
 - construction s: for the optimal-control (ocp-*) planners, the NLP construction: the
-  ``construction_time_s`` of the first plan after clearing the ocp module's caches
-  (``_interval``, ``_interval_functions``, ``_interval_key``, ``_nlp``, ``_solver``,
-  ``_probe``): building the interval's functions, the NLP assembled from them and the IPOPT
-  solver, and generating the C of the interval's functions (the compiler then runs in the
-  background unless the library is already in the disk cache). The other planners build
-  nothing ahead: for them it is the time of the ``load_problem`` of the fresh problem (the
-  JSON has ``load_s`` for every planner).
+  ``construction_time_s`` of the first plan after clearing the ocp package's caches
+  (``nlp.interval``, ``nlp.symbolic_functions``, ``nlp.formulation_key``,
+  ``nlp.build_nlp``, ``ipopt.solver``, ``refinement.probe``, and in path coordinates
+  ``path_nlp.build``, ``path_planner.solver``): building the interval's
+  functions, the NLP assembled from them and the IPOPT solver, and generating the C of the
+  interval's functions (the compiler then runs in the background unless the library is
+  already in the disk cache). The other planners build nothing ahead: for them it is the
+  time of the ``load_problem`` of the fresh problem (the JSON has ``load_s`` for every
+  planner).
 - cached s (ocp-* only): the same construction once the compiled library is on disk (the
   in-process caches cleared again): what a second process or a sweep worker pays.
 - first s: wall time of the first ``spm_opt.plan`` on the fresh problem (cold: with the
   construction above and the problem's lazily computed contour and inverse kinematics).
 - median s: median wall time of ``--repeats`` further ``spm_opt.plan`` calls (warm).
+- judge s: median wall time of ``spm_opt.evaluate`` of a fresh ``copy.deepcopy`` of each
+  warm plan (made outside the timing): the evaluator keeps each trajectory object's report,
+  and a copy is judged anew (the JSON's ``judge_s`` has every call's).
+- plan+judge s: median wall time of ``plan = spm_opt.plan(problem, name)`` then
+  ``spm_opt.evaluate(problem, plan)``, as a user runs them (the warm plans above, each
+  judged after its plan's time was taken; ``plan_judge_s``): a planner that judged its own
+  plan (the ocp-* planners do) leaves its report, and the second call only copies it.
 - solver s: median of the statistics' ``solve_time_s`` (IPOPT's wall time for the ocp-*
   planners; the planner's own timing, or registry.plan's, for the others).
 - f-eval s, iters (ocp-* only): median time IPOPT spent evaluating the NLP's functions and
@@ -47,6 +56,7 @@ A planner that raises gets a row with its error; the others still run.
 from __future__ import annotations
 
 import argparse
+import copy
 import os
 import sys
 import time
@@ -60,7 +70,8 @@ from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.model import dynamics
-from spm_opt.planners import nlp_library, ocp
+from spm_opt.planners.ocp import ipopt, nlp, nlp_library, path_nlp, path_planner, refinement
+from spm_opt.planners.ocp.planner import OcpPlanner
 
 REFERENCE = "cubic"
 
@@ -100,12 +111,14 @@ def warm_up(path: Path) -> dict[str, float]:
 
 def clear_ocp_caches() -> None:
     for cached in (
-        ocp._interval,
-        ocp._interval_functions,
-        ocp._interval_key,
-        ocp._nlp,
-        ocp._solver,
-        ocp._probe,
+        nlp.interval,
+        nlp.symbolic_functions,
+        nlp.formulation_key,
+        nlp.build_nlp,
+        ipopt.solver,
+        refinement.probe,
+        path_nlp.build,
+        path_planner.solver,
     ):
         cached.cache_clear()
 
@@ -114,7 +127,7 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
     """Time one planner (see the module docstring); raises what the planner raises, with
     ``phase`` (one item) naming the step that was under way."""
     phase[:] = ["load"]
-    is_ocp = isinstance(so.PLANNERS[name], ocp.OcpPlanner)
+    is_ocp = isinstance(so.PLANNERS[name], OcpPlanner)
     if is_ocp:
         clear_ocp_caches()
     started = time.perf_counter()
@@ -133,14 +146,18 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
         clear_ocp_caches()
         phase[:] = ["plan from the disk cache"]
         cached_load = so.plan(problem, name).metadata["statistics"]["construction_time_s"]
-    walls, runs = [], []
+    walls, judged, judges, runs = [], [], [], []
     for k in range(repeats):
         phase[:] = [f"warm plan {k + 1}"]
         started = time.perf_counter()
         again = so.plan(problem, name)
         walls.append(time.perf_counter() - started)
+        so.evaluate(problem, again)
+        judged.append(time.perf_counter() - started)
         runs.append(again.metadata["statistics"])
-        progress(f"{name}: warm plan {k + 1}/{repeats} {walls[-1]:.4g} s")
+        phase[:] = [f"judge {k + 1}"]
+        judges.append(judge_time(problem, again))
+        progress(f"{name}: warm plan {k + 1}/{repeats} {walls[-1]:.4g} s, judge {judges[-1]:.4g} s")
     phase[:] = ["evaluate"]
     report = so.evaluate(problem, trajectory)
     solves = [float(s["solve_time_s"]) for s in runs]
@@ -152,6 +169,10 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
         "first_plan_s": first,
         "plan_s": walls,
         "median_plan_s": median(walls) if walls else None,
+        "judge_s": judges,
+        "median_judge_s": median(judges) if judges else None,
+        "plan_judge_s": judged,
+        "median_plan_judge_s": median(judged) if judged else None,
         "solve_s": solves,
         "median_solve_s": median(solves) if solves else None,
         "duration_s": trajectory.duration,
@@ -163,7 +184,8 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
         own = [solve - function for solve, function in zip(solves, functions, strict=True)]
         around = [wall - solve for wall, solve in zip(walls, solves, strict=True)]
         resolved = any(
-            s["torque_in_nlp"] and s["settings"]["energy_weight"] == 0.0 for s in [cold, *runs]
+            s.get("torque_in_nlp", False) and s["settings"]["energy_weight"] == 0.0
+            for s in [cold, *runs]
         )
         result.update(
             function_s=functions,
@@ -180,6 +202,15 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
     return result
 
 
+def judge_time(problem: so.Problem, trajectory: so.Trajectory) -> float:
+    """Wall time, s, of ``spm_opt.evaluate`` of a fresh copy of ``trajectory`` (its report
+    not yet kept)."""
+    fresh = copy.deepcopy(trajectory)
+    started = time.perf_counter()
+    so.evaluate(problem, fresh)
+    return time.perf_counter() - started
+
+
 def number(value: float | None, width: int = 9) -> str:
     return f"{'-':>{width}s}" if value is None else f"{value:{width}.4g}"
 
@@ -187,8 +218,8 @@ def number(value: float | None, width: int = 9) -> str:
 def print_table(results: dict[str, dict[str, Any]]) -> None:
     print(
         f"{'planner':16s} {'constr s':>9s} {'cached s':>9s} {'first s':>9s} {'median s':>9s} "
-        f"{'solver s':>9s} {'f-eval s':>9s} {'iters':>6s} {'duration s':>10s} "
-        f"{'over bound':>10s} {'ratio':>9s}"
+        f"{'judge s':>9s} {'plan+judge s':>12s} {'solver s':>9s} {'f-eval s':>9s} "
+        f"{'iters':>6s} {'duration s':>10s} {'over bound':>10s} {'ratio':>9s}"
     )
     for name, r in results.items():
         if "error" in r:
@@ -200,7 +231,8 @@ def print_table(results: dict[str, dict[str, Any]]) -> None:
         print(
             f"{label:16s} {number(r['construction_s'])} {number(r.get('cached_construction_s'))} "
             f"{number(r['first_plan_s'])} "
-            f"{number(r['median_plan_s'])} {number(r['median_solve_s'])} "
+            f"{number(r['median_plan_s'])} {number(r['median_judge_s'])} "
+            f"{number(r['median_plan_judge_s'], 12)} {number(r['median_solve_s'])} "
             f"{number(r.get('median_function_s'))} "
             f"{'-' if iterations is None else f'{iterations:g}':>6s} "
             f"{number(r['duration_s'], 10)} {number(r['duration_over_lower_bound'], 10)} "
