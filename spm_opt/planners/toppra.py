@@ -257,7 +257,7 @@ class _PathPoints:
         return _PathPoints(*(getattr(self, f.name)[index] for f in dataclasses.fields(self)))
 
 
-def _path_points(problem: Problem, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> _PathPoints:
+def path_points(problem: Problem, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> _PathPoints:
     """The model's terms at path points q, q', q'' (N, 2): rad, rad/mm, rad/mm². Two
     evaluations of the model for any N: the frictionless torques at rest, at rest pushed by
     each unit joint acceleration and moving at q', and the friction moving at q'."""
@@ -683,7 +683,7 @@ def _segment_motion(
     """The motion along segment ``index`` within every limit: toppra and smoothing, again
     with tighter shares of whatever limit the smoothed motion still exceeds."""
     s = _gridpoints(segment.length, settings.gridpoints)
-    points = _path_points(problem, *segment.derivatives(s))
+    points = path_points(problem, *segment.derivatives(s))
     shares = _first_shares(settings)
     for run in range(1, _ATTEMPTS + 1):
         piece = _attempt(problem, index, segment, s, points, settings, shares)
@@ -752,7 +752,7 @@ def _rough_pieces(problem: Problem, settings: ToppraSettings) -> list[_Piece]:
     segments = _segments(problem, GUESS_PATH_SAMPLES)
     grids = [_gridpoints(segment.length, GUESS_GRIDPOINTS) for segment in segments]
     derivatives = [segment.derivatives(s) for segment, s in zip(segments, grids, strict=True)]
-    points = _path_points(problem, *(np.vstack(order) for order in zip(*derivatives, strict=True)))
+    points = path_points(problem, *(np.vstack(order) for order in zip(*derivatives, strict=True)))
     x_max = _speed_bound(problem, points.q, points.dq, shares)
     pieces = []
     for k, (segment, s) in enumerate(zip(segments, grids, strict=True)):

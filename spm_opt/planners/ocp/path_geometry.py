@@ -26,7 +26,7 @@ from scipy.interpolate import CubicSpline
 
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.planners.toppra import _path_points
+from spm_opt.planners.toppra import path_points
 from spm_opt.problem import Problem
 
 CLUSTER = 1.5
@@ -109,7 +109,7 @@ class SegmentPath:
 
         q, a1, a2, a3 = along(self.joints)
         v, v1, v2, v3 = along(self.lateral)
-        points = _path_points(problem, q, a1, a2)
+        points = path_points(problem, q, a1, a2)
         return {
             "q": q,
             "A1": a1,

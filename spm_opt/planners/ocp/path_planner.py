@@ -31,6 +31,7 @@ from spm_opt.evaluate import evaluate
 from spm_opt.limits import PlannerBounds, planner_bounds
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp import ipopt
+from spm_opt.planners.ocp.constraints import UNLIMITED
 from spm_opt.planners.ocp.path_geometry import SegmentPath, path_map, segment_paths
 from spm_opt.planners.ocp.path_nlp import (
     CONTROL,
@@ -48,8 +49,6 @@ from spm_opt.planners.ocp.settings import OcpSettings
 from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
 
-UNLIMITED = 1e3
-"""Stands in for a limit the problem leaves open (in the row's unit)."""
 PATH_SAMPLES = 200
 """Inverse-kinematics samples per segment through which q₀(s) runs."""
 ZONES = (2.0, 0.5)
@@ -93,9 +92,9 @@ def _limits(problem: Problem, bounds: PlannerBounds) -> np.ndarray:
     )
 
 
-def _parameters(problem: Problem, paths: list[SegmentPath], limits: np.ndarray) -> np.ndarray:
-    """The NLP's p: per segment the terms at every place, the interval lengths and the
-    ends' terms; then the limits."""
+def _path_parameters(problem: Problem, paths: list[SegmentPath]) -> np.ndarray:
+    """The NLP's p but its limits: per segment the terms at every place, the interval
+    lengths and the ends' terms."""
     blocks = []
     for path in paths:
         lengths = np.diff(path.nodes)
@@ -106,7 +105,7 @@ def _parameters(problem: Problem, paths: list[SegmentPath], limits: np.ndarray) 
         ends = path.terms(problem, path.nodes[[0, -1]])
         blocks.append(path.ends_speed_factor)
         blocks += [ends[name].ravel() for name in ENDS]
-    return np.concatenate([*blocks, limits])
+    return np.concatenate(blocks)
 
 
 def _start(paths: list[SegmentPath], limits: np.ndarray) -> np.ndarray:
@@ -177,9 +176,10 @@ def plan_in_path_coordinates(
     guess = solved[1] if continued else {"x0": _start(paths, limits)}
     statistics: dict[str, Any] = {"iterations": 0, "solve_time_s": 0.0, "function_time_s": 0.0}
     statistics["construction_time_s"] = time.perf_counter() - started
+    along = _path_parameters(problem, paths)  # the limits change between rounds, not these
     for round_ in range(REFINEMENTS + 1):
         solving_with = solver(len(paths), intervals, settings, warm=continued or round_ > 0)
-        parameters = _parameters(problem, paths, limits)
+        parameters = np.concatenate([along, limits])
         solving = time.perf_counter()
         solution = interrupt.solve(solving_with, **guess, p=parameters, **_box(nlp, limits[5]))
         stats = solving_with.stats()

@@ -27,7 +27,7 @@ from spm_opt.planners.ocp.refinement import (
     torque_exceeded,
 )
 from spm_opt.planners.ocp.settings import OcpSettings
-from spm_opt.planners.ocp.solve import added, solve
+from spm_opt.planners.ocp.solve import Solution, added, solve
 from spm_opt.planners.ocp.transcription import Grid, default_fractions
 from spm_opt.planners.ocp.warm_start import SOLVED, Solved
 from spm_opt.problem import Problem
@@ -84,22 +84,13 @@ class OcpPlanner:
             try:
                 if isinstance(start, Solved):  # its solution and multipliers: continue
                     fractions, demanded = start.fractions, start.demanded
-                    solution = solve(
-                        self.name,
-                        problem,
-                        settings,
-                        bounds,
-                        fractions,
-                        with_torque,
-                        demanded,
-                        start.solution,
-                    )
+                    begin: np.ndarray | Solution = start.solution
                 else:
                     durations = segment_durations(problem, settings.timing, need, start)
-                    x0 = initial_guess(problem, grid, durations, start)
-                    solution = solve(
-                        self.name, problem, settings, bounds, fractions, with_torque, demanded, x0
-                    )
+                    begin = initial_guess(problem, grid, durations, start)
+                solution = solve(
+                    self.name, problem, settings, bounds, fractions, with_torque, demanded, begin
+                )
                 break
             except PlanningError:
                 if number == len(starts):
@@ -140,25 +131,15 @@ class OcpPlanner:
             if round_ == 1:  # later, what moved check points did not cure is tightened
                 broken = [v for v in broken if v.rule not in found]
             broken = [v for v in broken if v.rule not in newly]
-            if broken or newly:
-                # from x alone: continuing with the multipliers of looser bounds as well
-                # halves the iterations but ends in worse optima (five landmarks: ∫τᵀτ
-                # 0.885 against 0.855); new rows have none
-                bounds = tightened(bounds, broken)
-                solution = solve(
-                    self.name,
-                    problem,
-                    settings,
-                    bounds,
-                    fractions,
-                    with_torque,
-                    demanded,
-                    solution.x,
-                )
-            else:  # the same problem with a few check points moved: continue
-                solution = solve(
-                    self.name, problem, settings, bounds, fractions, with_torque, demanded, solution
-                )
+            # from x alone after tighter bounds or new rows: continuing with the multipliers
+            # of looser bounds as well halves the iterations but ends in worse optima (five
+            # landmarks: ∫τᵀτ 0.885 against 0.855); new rows have none. The same problem
+            # with a few check points moved continues with them.
+            bounds = tightened(bounds, broken)
+            begin = solution.x if broken or newly else solution
+            solution = solve(
+                self.name, problem, settings, bounds, fractions, with_torque, demanded, begin
+            )
             statistics = added(statistics, solution.statistics)
         raise PlanningError(
             f"{self.name}: the evaluator still finds {'; '.join(map(str, broken))} after "
