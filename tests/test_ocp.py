@@ -64,15 +64,10 @@ def test_warm_start_from_a_solved_plan(paper_problem, min_time):
     assert_within_limits(paper_problem, again)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="IPOPT's warm start saves little: in path coordinates 23 iterations continued "
-    "against 28 cold (in the time domain, with the feed hold's room, which depends on the "
-    "tool-speed limit, 61 against 60)",
-)
 def test_a_similar_problem_continues_from_a_plans_solution(paper_problem, min_time):
     """A faster tool (another problem, the NLP of the same shape) starts from the plan's
-    solution and multipliers: fewer iterations than from scratch, the same cut."""
+    solution and multipliers: fewer iterations than from scratch, the same cut (12 against
+    22; at 2.8, 3.1 and 3.5 mm/s, 15, 10 and 16 against 23, 26 and 25)."""
     faster = with_limits(paper_problem, max_tool_speed=3.25 * MM)
     continued = so.plan(faster, "ocp-min-time", warm_start=min_time)
     cold = so.plan(faster, "ocp-min-time")
@@ -80,7 +75,7 @@ def test_a_similar_problem_continues_from_a_plans_solution(paper_problem, min_ti
     assert cold.metadata["statistics"]["start"] == "speed limits"
     assert_within_limits(faster, continued)
     iterations = [p.metadata["statistics"]["iterations"] for p in (continued, cold)]
-    assert iterations[0] < 0.6 * iterations[1]
+    assert iterations[0] < 0.75 * iterations[1]
     assert continued.duration == pytest.approx(cold.duration, rel=1e-3)
     assert continued.duration < 0.95 * min_time.duration
 
@@ -129,12 +124,20 @@ def test_an_acceptable_level_stop_that_cannot_be_made_strict_is_an_error(
 
 
 def test_limits_exceeded_between_constraint_points_are_solved_again(paper_problem):
-    """Minimum jerk with one check point per interval bulges past a limit between the
-    checks (at first three times, with the smooth surface through the landmarks); the
-    planner re-solves with checks moved and bounds tightened until the evaluator finds
-    nothing."""
+    """Minimum jerk in the time domain with one check point per interval bulges past a
+    limit between the checks (at first three times, with the smooth surface through the
+    landmarks); the planner re-solves with checks moved and bounds tightened until the
+    evaluator finds nothing."""
     problem = dataclasses.replace(
-        paper_problem, planner_options={"ocp-min-jerk": {"checks_per_interval": 1}}
+        paper_problem,
+        planner_options={
+            "ocp-min-jerk": {
+                "transcription": "time",
+                "nodes_per_phase": 16,
+                "corner_nodes": 8,
+                "checks_per_interval": 1,
+            }
+        },
     )
     plan = so.plan(problem, "ocp-min-jerk")
     statistics = plan.metadata["statistics"]

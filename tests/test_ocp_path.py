@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from plan_checks import assert_within_limits
+from plan_checks import assert_within_limits, cut_points, on_contour, sample
 
 import spm_opt as so
+from spm_opt.bounds import segment_lower_bounds
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp.path_geometry import path_map, segment_paths
@@ -109,11 +110,55 @@ def test_min_time_in_path_coordinates_passes_the_landmarks_within_the_limits(nam
     assert plan.duration < so.plan(problem, "toppra").duration
 
 
-def test_path_coordinates_are_for_minimum_time_only(paper_problem):
-    """Another objective in path coordinates is a one-line error naming the key."""
+@pytest.mark.parametrize("planner", ["ocp-min-energy", "ocp-min-jerk", "ocp-mix"])
+def test_objectives_over_time_plan_in_path_coordinates(paper_problem, planner):
+    """∫τᵀτ dt, ∫jerk² dt and the mix, each integrated over u with dt = du / √β: every limit
+    kept by the tests' own measure, minimum jerk lasting the problem's 40 s (a row of the
+    time) and minimum energy no longer."""
+    plan = so.plan(paper_problem, planner)
+    assert plan.metadata["statistics"]["transcription"] == "path"
+    assert_within_limits(paper_problem, plan, landmark_tolerance=0.01 * MM)
+    total = float(np.sum(paper_problem.segment_durations))
+    if planner == "ocp-min-jerk":
+        assert plan.duration == pytest.approx(total, rel=1e-5)
+    elif planner == "ocp-min-energy":
+        assert plan.duration <= total * (1 + 1e-5)
 
+
+def test_each_segment_keeps_its_duration_when_the_timing_holds_them(paper_problem):
+    """timing = "segments": one row of time a segment; the cut is at each landmark (forward
+    kinematics, in the checks) at the times the durations give."""
+    uneven = 1.1 * segment_lower_bounds(paper_problem) * np.array([1.0, 1.2, 1.05, 1.1])
     problem = dataclasses.replace(
-        paper_problem, planner_options={"ocp-min-energy": {"transcription": "path"}}
+        paper_problem,
+        segment_durations=uneven,
+        planner_options={"ocp-min-jerk": {"timing": "segments"}},
     )
-    with pytest.raises(so.InputError, match=r"planner\.ocp-min-energy\.transcription = 'path'"):
-        so.plan(problem, "ocp-min-energy")
+    plan = so.plan(problem, "ocp-min-jerk")
+    assert plan.metadata["statistics"]["transcription"] == "path"
+    assert_within_limits(problem, plan, landmark_tolerance=0.01 * MM)
+    visits = np.asarray(plan.metadata["landmark_times_s"])
+    np.testing.assert_allclose(np.diff(visits), problem.segment_durations, rtol=1e-5)
+
+
+def test_without_a_tube_the_planners_work_in_the_time_domain(hardware_problem):
+    """The hardware run has no contour tube: "auto" plans in the time domain, where the cut
+    is free in joint space."""
+    plan = so.plan(hardware_problem, "ocp-min-time")
+    assert plan.metadata["statistics"]["transcription"] == "time"
+
+
+def test_path_coordinates_without_a_tube_stay_within_a_millimetre(hardware_problem):
+    """Asked for, path coordinates on the hardware run keep the cut within 1 mm of the
+    contour (the checks' own distance to the arcs), where the offset's model holds; it
+    uses more than a 0.1 mm tube would give."""
+    problem = dataclasses.replace(
+        hardware_problem, planner_options={"ocp-min-time": {"transcription": "path"}}
+    )
+    plan = so.plan(problem, "ocp-min-time")
+    assert plan.metadata["statistics"]["transcription"] == "path"
+    assert_within_limits(problem, plan)
+    q = sample(plan).q
+    cut = on_contour(problem, cut_points(q, problem.surface.radius), problem.surface.radius)
+    # the offset is the distance to first order: 1 mm of it moved the cut 1.001 mm
+    assert 0.1 * MM < np.max(cut.distance) <= 1.0 * MM * (1 + 1e-2)

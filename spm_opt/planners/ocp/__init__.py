@@ -1,17 +1,19 @@
 """Optimal-control planners: minimum time, energy or jerk through the landmarks, on the cut,
 within the actuators' limits (CasADi + IPOPT).
 
-Two transcriptions. ``ocp-min-time`` works in path coordinates
-(:mod:`~spm_opt.planners.ocp.path_planner`): the contour's arc length is the independent
-variable, the cut's speed along it and a lateral offset within the tube are the states, and
-there are no free durations, so IPOPT converges in ~25 iterations (56 in the time domain on
-the paper's flap) to a cut that passes the landmarks without stopping. The others transcribe
-the motion on a grid of phases whose durations are variables
-(:mod:`~spm_opt.planners.ocp.transcription`): their objectives are integrals over time and
-their timing may be fixed. Every limit the time-domain planners keep is declared once
-(:mod:`~spm_opt.planners.ocp.constraints`); the NLP is built once per shape
-(:mod:`~spm_opt.planners.ocp.nlp`) and solved by IPOPT (:mod:`~spm_opt.planners.ocp.ipopt`)
-until the evaluator finds the plan clean (:mod:`~spm_opt.planners.ocp.refinement`,
+Two transcriptions. Where the problem has a contour tube, every planner works in path
+coordinates (:mod:`~spm_opt.planners.ocp.path_planner`): the contour's arc length is the
+independent variable, the cut's speed along it and a lateral offset within the tube are the
+states, and there are no free durations, so IPOPT converges in 20-30 iterations (56 to 111
+in the time domain on the paper's flap) to a cut that passes the landmarks without
+stopping; the objectives over time are integrals over the arc length with dt = du / √β.
+Without a tube (the hardware run, which cuts nothing) they transcribe the motion on a grid
+of phases whose durations are variables (:mod:`~spm_opt.planners.ocp.transcription`), the
+cut free in joint space; ``transcription`` in ``[planner.NAME]`` chooses either. Every limit
+the time-domain planners keep is declared once (:mod:`~spm_opt.planners.ocp.constraints`);
+the NLP is built once per shape (:mod:`~spm_opt.planners.ocp.nlp`) and solved by IPOPT
+(:mod:`~spm_opt.planners.ocp.ipopt`) until the evaluator finds the plan clean
+(:mod:`~spm_opt.planners.ocp.refinement`,
 :class:`~spm_opt.planners.ocp.planner.OcpPlanner`). This module registers the four
 planners.
 
@@ -22,13 +24,14 @@ durations free; minimum energy keeps the problem's total duration as a maximum
 ("bounded": gravity holding dominates this robot's torques, so a shorter cut can cost less
 effort); minimum jerk keeps the total ("total"; "segments" keeps every segment's).
 
-Starts: ``ocp-min-time`` in path coordinates starts at 80 % of the speed limits along the
-contour. In the time domain (``transcription = "time"``) it starts from toppra's
-time-optimal parameterisation of the contour
+Starts, in path coordinates: 80 % of the speed limits along the contour, re-timed to the
+problem's durations where the timing keeps them (starting minimum energy from the
+minimum-time plan's solution instead saved 1-5 iterations, less than that plan costs). In
+the time domain
+``ocp-min-time`` starts from toppra's time-optimal parameterisation of the contour
 (:func:`~spm_opt.planners.toppra.time_optimal_guess`, ~10 ms), and from the
-contour-following guess if IPOPT fails from there (on the paper's flap the near-optimal
-start found 37.87 s, the contour-following one 38.09 s). The others start from the
-minimum-time plan re-timed to their durations (:mod:`~spm_opt.planners.ocp.guess`).
+contour-following guess if IPOPT fails from there; the others start from the minimum-time
+plan re-timed to their durations (:mod:`~spm_opt.planners.ocp.guess`).
 """
 
 from spm_opt.planners.ocp.planner import OcpPlanner
@@ -45,19 +48,19 @@ MIN_TIME = register(
             timing="free",
             time_weight=1.0,
             jerk_weight=MIN_TIME_JERK_WEIGHT,
-            transcription="path",
             nodes_per_phase=4,
         ),
         start=time_optimal_guess,
     )
 )
 MIN_ENERGY = register(
-    # min-time's margin, so that its plan (the start) is feasible here; the grid of
-    # min-jerk: with min-time's (10 middle intervals, one check) the re-solves after a
-    # tightened tube failed on the five-landmark and the large flaps (1000 iterations);
-    # up to 1000 iterations a solve: on small flaps with tight tubes the effort falls
-    # slowly, in short steps (IPOPT's steps cut to 5-50 % for a hundred iterations), and 3
-    # of a sample of 18 varied flaps took 383-542 iterations in their two solves
+    # min-time's margin, so that its plan (the start) is feasible here; in path
+    # coordinates 8 middle intervals: with 4 and 16 its ∫τᵀτ on the skull flap came out
+    # above min-time's (0.61663 and 0.61656 against 0.61648), with 8 0.61618. In the time
+    # domain 16 (with 8 and 12 the hardware run's cut ran back 0.008 and 0.003 mm; with 10
+    # and one check the re-solves after a tightened tube failed on the five-landmark and
+    # the large flaps), and up to 1000 iterations a solve: on small flaps with tight tubes
+    # the effort falls slowly
     OcpPlanner(
         "ocp-min-energy",
         OcpSettings(
@@ -65,6 +68,7 @@ MIN_ENERGY = register(
             jerk_weight=1e-4,
             timing="bounded",
             nodes_per_phase=16,
+            path_intervals=8,
             checks_per_interval=3,
             max_iterations=1000,
         ),
@@ -77,7 +81,13 @@ MIN_JERK = register(
     # paper's flap, but 0.23 mm off the contour on the large flap after three re-solves)
     OcpPlanner(
         "ocp-min-jerk",
-        OcpSettings(jerk_weight=1.0, nodes_per_phase=16, checks_per_interval=3, margin=0.02),
+        OcpSettings(
+            jerk_weight=1.0,
+            nodes_per_phase=24,
+            corner_nodes=16,
+            checks_per_interval=3,
+            margin=0.02,
+        ),
         start=MIN_TIME.plan,
     )
 )
@@ -90,6 +100,7 @@ MIX = register(
             time_weight=1.0,
             jerk_weight=1.0,
             nodes_per_phase=16,
+            corner_nodes=16,
             checks_per_interval=3,
             margin=0.02,
         ),

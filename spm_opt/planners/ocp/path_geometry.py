@@ -38,6 +38,13 @@ ZONE_INTEGRAL = 0.6
 """∫₀¹ S(x) dx: an end zone's share of its length in arc length."""
 
 
+def _chebyshev(intervals: int) -> np.ndarray:
+    """``intervals`` + 1 nodes on [0, 1], Chebyshev–Lobatto: finer towards both ends,
+    where the cut speeds up, slows down and turns (on the paper's flap, ocp-min-jerk's
+    ∫ q⃛ᵀq⃛ dt 0.737 rad²/s⁵ on even nodes, 0.396 on these; minimum time 37.977 and 37.976 s)."""
+    return (1.0 - np.cos(np.pi * np.arange(intervals + 1) / intervals)) / 2
+
+
 def _zone_shape(x: np.ndarray) -> tuple[np.ndarray, ...]:
     """S(x) (1 beyond x = 1), S', S'' and ∫₀ˣ S."""
     inside, y = x < 1.0, np.minimum(x, 1.0)
@@ -183,7 +190,7 @@ def segment_paths(
         xi = np.concatenate(
             [
                 node_zone[0] * spread[0],
-                np.linspace(node_zone[0], 1.0 - node_zone[1], middle + 1)[1:],
+                node_zone[0] + (1.0 - node_zone[1] - node_zone[0]) * _chebyshev(middle)[1:],
                 1.0 - node_zone[1] * spread[1][::-1][1:],
             ]
         )

@@ -1,10 +1,11 @@
-"""Minimum time in path coordinates (``transcription = "path"``): solve, rebuild the
-motion, judge it, and solve again with tighter bounds until the evaluator finds it clean.
+"""The optimal-control plans in path coordinates (``transcription = "path"``): solve, rebuild
+the motion, judge it, and solve again with tighter bounds until the evaluator finds it clean.
 
 The NLP (:mod:`~spm_opt.planners.ocp.path_nlp`) has no free durations: its only
 nonlinearities are √β in the jerk, torque and time terms and the offset's products with β,
-so IPOPT converges in ~30 iterations from a start at :data:`START_SPEED` of the tool-speed
-limit with d = 0 (the time-domain transcription: ~55, from toppra's motion). The plan is
+so IPOPT converges in 20-30 iterations from a start at :data:`START_SPEED` of the speed
+limits with d = 0 (the time-domain transcription: ~55 for minimum time, from toppra's
+motion, and 100-110 for the other objectives). The plan is
 the motion x describes, sampled :data:`SAMPLES_PER_INTERVAL` times an interval (q = q₀ + d v;
 q̇ and q̈ from the formulas; times by 8-point Gauss–Legendre quadrature of du / √β), as
 quintic Hermite pieces through the samples.
@@ -37,6 +38,7 @@ from spm_opt.planners.ocp.path_nlp import (
     CONTROL,
     ENDS,
     MIN_BETA,
+    OBJECTIVES,
     PLACES,
     STATE,
     TERMS,
@@ -59,6 +61,15 @@ between, evenly spaced: corner zones of 0.5, 0.75 and 1 ramp gave 37.984, 37.996
 gave 37.979, 37.983, 37.985 s)."""
 START_SPEED = 0.8
 """The start's cut speed, as a fraction of the fastest the speed limits allow."""
+MAX_OFFSET = 1.0
+"""Widest offset from the contour, mm, where the problem has no tube (or a wider one): the
+offset's model of the motion is first order in it (on the hardware run, which has no tube,
+minimum energy's cut strayed 33 mm without it, where that model's ∫τᵀτ was a quarter of the
+evaluator's)."""
+JERK_TIE_BREAKER = 1e-4
+"""The largest jerk weight beside time or effort that counts as a tie-breaker (minimum
+energy's 1e-4: weighed here, it traded ∫τᵀτ for smoothness, so that on the skull flap the
+minimum-energy plan took 0.03 % more effort than the minimum-time one)."""
 SAMPLES_PER_INTERVAL = 4
 """Samples of the plan per interval of the grid."""
 
@@ -68,8 +79,29 @@ def solver(segments: int, intervals: int, settings: OcpSettings, warm: bool) -> 
     """IPOPT on :func:`~spm_opt.planners.ocp.path_nlp.build`'s NLP; ``warm``: continuing
     from a solution and its multipliers."""
     options = ipopt.options(settings, warm, acceptable_iterations=0)
-    nlp = build(segments, intervals).problem
+    nlp = build(segments, intervals, objectives(settings), settings.timing).problem
     return ca.nlpsol("path", "ipopt", nlp, {"ipopt": options, "print_time": False})
+
+
+def objectives(settings: OcpSettings) -> tuple[str, ...]:
+    """The objective's terms (of :data:`~spm_opt.planners.ocp.path_nlp.OBJECTIVES`) that
+    ``settings`` weigh. A jerk weight of at most :data:`JERK_TIE_BREAKER` beside another
+    term is the time domain's tie-breaker; here the offset's smoothing term is."""
+    tie_breaker = settings.jerk_weight <= JERK_TIE_BREAKER
+    others = settings.time_weight > 0.0 or settings.energy_weight > 0.0
+    weighed = {
+        "time": settings.time_weight,
+        "effort": settings.energy_weight,
+        "jerk": 0.0 if tie_breaker and others else settings.jerk_weight,
+    }
+    return tuple(name for name in OBJECTIVES if weighed[name] > 0.0)
+
+
+def _weights(settings: OcpSettings, at_start: np.ndarray) -> np.ndarray:
+    """The objective's weights (:data:`OBJECTIVES`'s order), each over its term's value at
+    the start, so that the settings' weights compare like with like."""
+    given = np.array([settings.time_weight, settings.energy_weight, settings.jerk_weight])
+    return np.where(np.isin(OBJECTIVES, objectives(settings)), given / at_start, 0.0)
 
 
 def _limits(problem: Problem, bounds: PlannerBounds) -> np.ndarray:
@@ -86,7 +118,7 @@ def _limits(problem: Problem, bounds: PlannerBounds) -> np.ndarray:
             given(bounds.joint_acceleration),
             given(bounds.joint_jerk),
             bounds.load_torque,
-            given(bounds.contour_tolerance, MM),
+            min(given(bounds.contour_tolerance, MM), MAX_OFFSET),
             *problem.robot.actuator.viscous_friction_nm_s_rad,
         ]
     )
@@ -121,9 +153,30 @@ def _start(paths: list[SegmentPath], limits: np.ndarray) -> np.ndarray:
     return np.concatenate(blocks)
 
 
+def _retimed(
+    problem: Problem, nlp: PathNlp, x: np.ndarray, parameters: np.ndarray, timing: str
+) -> np.ndarray:
+    """x at the problem's durations where the timing keeps them: each segment's
+    (``"segments"``), their total (``"total"``, and ``"bounded"`` when x is slower); β and
+    its derivatives scaled by the square of each segment's speed-up."""
+    if timing == "free":
+        return x
+    times = nlp.integrals(x, parameters)[1].full().ravel()
+    given = problem.segment_durations
+    speedup = times / given if timing == "segments" else np.sum(times) / np.sum(given)
+    if timing == "bounded":
+        speedup = max(speedup, 1.0)
+    scaled = x.copy()
+    for segment, faster in enumerate(np.broadcast_to(speedup, len(given))):
+        states, controls = nlp.split(scaled, segment)  # views into scaled
+        states[:, :2] *= faster**2
+        controls[:, 0] *= faster**2
+    return scaled
+
+
 def _box(nlp: PathNlp, tube_mm: float) -> dict[str, np.ndarray]:
     """Variable bounds: β > 0, the offset within the tube and 0 at every landmark, at rest
-    at the first and the last; and the rows' bounds."""
+    at the first and the last."""
     low, high = [], []
     for segment in range(nlp.segments):
         states_low = np.full((nlp.intervals + 1, STATE), -np.inf)
@@ -138,26 +191,24 @@ def _box(nlp: PathNlp, tube_mm: float) -> dict[str, np.ndarray]:
         controls = np.full(CONTROL * nlp.intervals, np.inf)
         low += [states_low.ravel(), -controls]
         high += [states_high.ravel(), controls]
-    return {
-        "lbx": np.concatenate(low),
-        "ubx": np.concatenate(high),
-        "lbg": nlp.low,
-        "ubg": nlp.high,
-    }
+    return {"lbx": np.concatenate(low), "ubx": np.concatenate(high)}
 
 
-Continuation = tuple[tuple[int, int], dict[str, np.ndarray]]
+Continuation = tuple[tuple[int, int, tuple[str, ...], str], dict[str, np.ndarray]]
 SOLVED: weakref.WeakKeyDictionary[Trajectory, Continuation] = weakref.WeakKeyDictionary()
-"""Each plan's NLP shape (segments, intervals) and last solution with its multipliers: the
-start of a similar problem's solve (``warm_start``)."""
+"""Each plan's NLP shape (segments, intervals, objectives, timing) and last solution with
+its multipliers: the start of a similar problem's solve (``warm_start``)."""
 
 
 def plan_in_path_coordinates(
-    problem: Problem, settings: OcpSettings, name: str, warm_start: Trajectory | None = None
+    problem: Problem,
+    settings: OcpSettings,
+    name: str,
+    warm_start: Trajectory | None = None,
 ) -> Trajectory:
-    """The minimum-time plan, clean under the evaluator, or a :class:`PlanningError`
-    naming what IPOPT or the evaluator found; ``warm_start``, a plan of an NLP of the same
-    shape, is continued from its solution and multipliers."""
+    """The plan of ``settings``' objective and timing, clean under the evaluator, or a
+    :class:`PlanningError` naming what IPOPT or the evaluator found. ``warm_start``, a plan
+    of an NLP of the same shape, is continued from its solution and multipliers."""
     started = time.perf_counter()
     bounds = planner_bounds(problem, settings.margin)
     limits = _limits(problem, bounds)
@@ -165,23 +216,29 @@ def plan_in_path_coordinates(
         problem,
         (limits[0], limits[1], limits[2], limits[3]),
         PATH_SAMPLES,
-        (settings.corner_nodes, settings.nodes_per_phase),
+        settings.path_grid,
         ZONES,
     )
     intervals = len(paths[0].nodes) - 1
-    nlp = build(len(paths), intervals)
-    shape = (len(paths), intervals)
+    nlp = build(len(paths), intervals, objectives(settings), settings.timing)
+    shape = (len(paths), intervals, objectives(settings), settings.timing)
     solved = SOLVED.get(warm_start) if warm_start is not None else None
     continued = solved is not None and solved[0] == shape
-    guess = solved[1] if continued else {"x0": _start(paths, limits)}
+    along = _path_parameters(problem, paths)  # the limits change between rounds, not these
+    unweighted = np.concatenate([along, limits, np.ones(len(OBJECTIVES))])
+    start = _retimed(problem, nlp, _start(paths, limits), unweighted, settings.timing)
+    weights = _weights(settings, nlp.integrals(start, unweighted)[0].full().ravel())
+    guess = solved[1] if continued else {"x0": start}
     statistics: dict[str, Any] = {"iterations": 0, "solve_time_s": 0.0, "function_time_s": 0.0}
     statistics["construction_time_s"] = time.perf_counter() - started
-    along = _path_parameters(problem, paths)  # the limits change between rounds, not these
+    low, high = nlp.row_bounds(problem.segment_durations, settings.timing)
     for round_ in range(REFINEMENTS + 1):
         solving_with = solver(len(paths), intervals, settings, warm=continued or round_ > 0)
-        parameters = np.concatenate([along, limits])
+        parameters = np.concatenate([along, limits, weights])
         solving = time.perf_counter()
-        solution = interrupt.solve(solving_with, **guess, p=parameters, **_box(nlp, limits[5]))
+        solution = interrupt.solve(
+            solving_with, **guess, p=parameters, **_box(nlp, limits[5]), lbg=low, ubg=high
+        )
         stats = solving_with.stats()
         statistics["iterations"] += int(stats["iter_count"])
         statistics["solve_time_s"] += time.perf_counter() - solving
@@ -197,7 +254,7 @@ def plan_in_path_coordinates(
         statistics.update(
             refinements=round_,
             status=stats["return_status"],
-            constraint_violation=float(max(np.max(nlp.low - rows), np.max(rows - nlp.high), 0.0)),
+            constraint_violation=float(max(np.max(low - rows), np.max(rows - high), 0.0)),
             transcription="path",
             variables=int(nlp.problem["x"].numel()),
             rows=int(rows.size),

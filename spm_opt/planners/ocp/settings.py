@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from spm_opt.errors import InputError
 from spm_opt.planners.ocp.transcription import Grid
 from spm_opt.planners.registry import planner_options, settings_from_options
 from spm_opt.problem import Problem
@@ -20,6 +19,9 @@ class OcpSettings:
     ----------
     nodes_per_phase : int
         Intervals along the middle of each segment.
+    path_intervals : int
+        In path coordinates, the intervals between a segment's end zones (0: as many as
+        ``nodes_per_phase``).
     corner_nodes : int
         Intervals in each of the two short phases at a segment's ends.
     checks_per_interval : int
@@ -45,14 +47,17 @@ class OcpSettings:
     print_level : int
         IPOPT's verbosity (0 silent, 5 every iteration).
     transcription : str
-        "time" (phases of free durations) or "path" (the contour's arc length as the
-        independent variable and a lateral offset within the tube; minimum time only). With
+        "path" (the contour's arc length as the independent variable and a lateral offset
+        within the tube), "time" (phases of free durations: the cut free in joint space), or
+        "auto": "path" where the problem has a contour tube, else "time" (a run without
+        cutting: in path coordinates the cut could leave the contour by at most 1 mm). With
         "path", ``corner_nodes`` counts the intervals of the zone at each end of a segment
-        and ``nodes_per_phase`` those between; ``checks_per_interval`` and
+        and ``path_intervals`` those between; ``checks_per_interval`` and
         ``acceptable_iterations`` do not apply.
     """
 
     nodes_per_phase: int = 10
+    path_intervals: int = 0
     corner_nodes: int = 8
     checks_per_interval: int = 1
     margin: float = 0.005
@@ -64,10 +69,11 @@ class OcpSettings:
     energy_weight: float = 0.0
     jerk_weight: float = 0.0
     print_level: int = 0
-    transcription: str = "time"
+    transcription: str = "auto"
 
     _RANGES = {
         "nodes_per_phase": (1, 200),
+        "path_intervals": (0, 200),
         "corner_nodes": (1, 50),
         "checks_per_interval": (1, 9),
         "margin": (0.0, 0.5),
@@ -86,13 +92,7 @@ class OcpSettings:
         errors."""
         options = planner_options(problem, name, OPTION_KEYS)
         choices = {"timing": TIMINGS, "transcription": TRANSCRIPTIONS}
-        settings = settings_from_options(name, defaults, options, cls._RANGES, choices)
-        if settings.transcription == "path" and not settings.minimum_time:
-            raise InputError(
-                f"planner.{name}.transcription = 'path': minimum time only (timing = 'free',"
-                " energy_weight = 0, jerk_weight at most 1e-6); use 'time'"
-            )
-        return settings
+        return settings_from_options(name, defaults, options, cls._RANGES, choices)
 
     @property
     def minimum_time(self) -> bool:
@@ -103,6 +103,11 @@ class OcpSettings:
             and self.jerk_weight <= MIN_TIME_JERK_WEIGHT
         )
 
+    @property
+    def path_grid(self) -> tuple[int, int]:
+        """In path coordinates: the intervals of each end zone and of the middle."""
+        return self.corner_nodes, self.path_intervals or self.nodes_per_phase
+
     def grid(self, segments: int) -> Grid:
         """The time grid of ``segments`` segments: corner, middle and corner phases of
         ``corner_nodes``, ``nodes_per_phase`` and ``corner_nodes`` intervals."""
@@ -112,7 +117,7 @@ class OcpSettings:
 
 TIMINGS = ("free", "bounded", "total", "segments")
 """The choices of :attr:`OcpSettings.timing`."""
-TRANSCRIPTIONS = ("time", "path")
+TRANSCRIPTIONS = ("auto", "path", "time")
 """The choices of :attr:`OcpSettings.transcription`."""
 MIN_TIME_JERK_WEIGHT = 1e-6
 """The jerk's weight in minimum time: a tie-breaker between equally fast motions."""
