@@ -112,6 +112,13 @@ def advance(state: Sequence[Any], control: Sequence[Any], h: Any) -> list[Any]:
     ]
 
 
+def _root(beta: ca.SX) -> ca.SX:
+    """√β, with β at least :data:`MIN_BETA`: between the nodes β is a row's business (its
+    hull), which IPOPT's trial points may break (on a varied flap, a NaN stopped minimum
+    jerk after 54 iterations)."""
+    return ca.sqrt(ca.fmax(beta, MIN_BETA))
+
+
 def _rows_at(terms: ca.SX, state: list[ca.SX], control: ca.SX, limits: ca.SX) -> dict[str, ca.SX]:
     """The motion's rows at one place from its path terms, state and control."""
     a1, a2, a3, v, v1, v2, v3 = (terms[2 * k : 2 * k + 2] for k in range(7))
@@ -123,7 +130,7 @@ def _rows_at(terms: ca.SX, state: list[ca.SX], control: ca.SX, limits: ca.SX) ->
     qu = a1 + d1 * v + d * v1
     quu = a2 + d2 * v + 2 * d1 * v1 + d * v2
     quuu = a3 + control[1] * v + 3 * d2 * v1 + 3 * d1 * v2 + d * v3
-    root = ca.sqrt(beta)
+    root = _root(beta)
     qdd = qu * slope / 2 + quu * beta
     torque = inertia @ qdd + bias * beta + gravity + friction + viscous * qu * root
     squared = metric[0] * qu[0] ** 2 + 2 * metric[1] * qu[0] * qu[1] + metric[2] * qu[1] ** 2
@@ -192,7 +199,7 @@ def build(
             low += [-1.0, -1.0, MIN_BETA]
             high += [1.0, 1.0, np.inf]
             per_time = [
-                weight * h / ca.sqrt(advance(ca.vertsplit(state), ca.vertsplit(control), x * h)[0])
+                weight * h / _root(advance(ca.vertsplit(state), ca.vertsplit(control), x * h)[0])
                 for x, weight in zip(*TIME_QUADRATURE, strict=True)
             ]
             segment_time += sum(per_time)
