@@ -35,7 +35,7 @@ from spm_opt.problem import Problem
 from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION
 
 PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
-DEFAULT_PLANNERS = ("toppra", "ocp-min-time", "ocp-min-energy", "ocp-min-jerk")
+DEFAULT_PLANNERS = ("toppra", "ocp-min-time", "ocp-min-energy", "ocp-min-jerk", "ocp-mix")
 
 
 def regular_flap(base: Problem, landmarks: int) -> Problem:

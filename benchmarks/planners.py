@@ -44,7 +44,8 @@ batch torque. Then, per planner, a freshly loaded problem and:
   ``spm_opt.evaluate`` of the cold plan, once, outside the timing.
 - ratio: median s over the cubic's median s.
 
-Under the table, for each ocp-* planner, the median plan wall time is split into function
+Under the table, for each ocp-* planner (its transcription and its NLP's size: the KKT
+system's variables and constraint rows), the median plan wall time is split into function
 evaluation, IPOPT's own work (solve − function evaluation: linear algebra, line search) and
 Python around the solve (wall − solve: initial guess, bounds, constraint report, torque
 check, trajectory, registry). When an ocp-* planner without an energy term has to solve
@@ -198,6 +199,9 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
             cold_function_s=float(cold["function_time_s"]),
             cold_iterations=int(cold["iterations"]),
             torque_resolve=resolved,
+            transcription=cold.get("transcription"),
+            variables=cold.get("variables"),
+            rows=cold.get("rows"),
         )
     return result
 
@@ -251,7 +255,8 @@ def print_breakdown(results: dict[str, dict[str, Any]]) -> None:
             ("Python around the solve", r["median_around_solve_s"]),
         )
         shares = ", ".join(f"{what} {s:.3g} s ({100 * s / wall:.0f} %)" for what, s in parts)
-        print(f"{name} median wall {wall:.3g} s: {shares}")
+        size = f"{r['variables']} variables, {r['rows']} rows" if r.get("rows") else "size -"
+        print(f"{name} ({r.get('transcription')}; {size}) median wall {wall:.3g} s: {shares}")
 
 
 def main() -> None:

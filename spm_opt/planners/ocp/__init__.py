@@ -4,7 +4,7 @@ within the actuators' limits (CasADi + IPOPT).
 Two transcriptions. Where the problem has a contour tube, every planner works in path
 coordinates (:mod:`~spm_opt.planners.ocp.path_planner`): the contour's arc length is the
 independent variable, the cut's speed along it and a lateral offset within the tube are the
-states, and there are no free durations, so IPOPT converges in 20-30 iterations (56 to 111
+states, and there are no free durations, so IPOPT converges in 23-32 iterations (56 to 111
 in the time domain on the paper's flap) to a cut that passes the landmarks without
 stopping; the objectives over time are integrals over the arc length with dt = du / √β.
 Without a tube (the hardware run, which cuts nothing) they transcribe the motion on a grid

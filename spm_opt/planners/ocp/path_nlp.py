@@ -16,10 +16,11 @@ landmarks are met exactly); at the first and the last the cut is at rest (the ma
 zone) with d' = d'' = 0; at a landmark the cut passes through, q̇ and q̈ are continuous:
 the arc length's rate, q_s, and q̈ itself agree on both sides.
 
-Objective: a weighted sum of the time Σ ∫ du / √β (Gauss–Legendre on every interval), the
-effort ∫ τᵀτ dt = ∫ τᵀτ / √β du and the jerk ∫ q⃛ᵀq⃛ dt = ∫ q⃛ᵀq⃛ / √β du (Simpson's rule;
-the weights are parameters), plus 1e-9 ∫ d'''² du, which keeps d smooth where the objective
-does not decide it. With fixed timing, rows hold the total time or each segment's.
+Objective: a weighted sum of the time Σ ∫ du / √β, the effort ∫ τᵀτ dt = ∫ τᵀτ / √β du and
+the jerk ∫ q⃛ᵀq⃛ dt = ∫ q⃛ᵀq⃛ / √β du (Gauss–Legendre on every interval, τᵀτ and q⃛ᵀq⃛ there
+from their parabola through the interval's three places; the weights are parameters), plus
+1e-9 ∫ d'''² du, which keeps d smooth where the objective does not decide it. With fixed
+timing, rows hold the total time or each segment's.
 """
 
 from __future__ import annotations
@@ -199,8 +200,8 @@ def build(
             low += [-1.0, -1.0, MIN_BETA]
             high += [1.0, 1.0, np.inf]
             per_time = [
-                weight * h / _root(advance(ca.vertsplit(state), ca.vertsplit(control), x * h)[0])
-                for x, weight in zip(*TIME_QUADRATURE, strict=True)
+                weight * h / _root(advance(ca.vertsplit(state), ca.vertsplit(control), at * h)[0])
+                for at, weight in zip(*TIME_QUADRATURE, strict=True)
             ]
             segment_time += sum(per_time)
             rates: dict[str, list[ca.SX]] = {name: [] for name in OBJECTIVES[1:]}

@@ -3,9 +3,9 @@ the motion, judge it, and solve again with tighter bounds until the evaluator fi
 
 The NLP (:mod:`~spm_opt.planners.ocp.path_nlp`) has no free durations: its only
 nonlinearities are √β in the jerk, torque and time terms and the offset's products with β,
-so IPOPT converges in 20-30 iterations from a start at :data:`START_SPEED` of the speed
+so IPOPT converges in 20-35 iterations from a start at :data:`START_SPEED` of the speed
 limits with d = 0 (the time-domain transcription: ~55 for minimum time, from toppra's
-motion, and 100-110 for the other objectives). The plan is
+motion, and 103-111 for the other objectives). The plan is
 the motion x describes, sampled :data:`SAMPLES_PER_INTERVAL` times an interval (q = q₀ + d v;
 q̇ and q̈ from the formulas; times by 8-point Gauss–Legendre quadrature of du / √β), as
 quintic Hermite pieces through the samples.
