@@ -46,8 +46,6 @@ PER_END = 2 + 2 * 2 * len(ENDS)
 LIMITS = ("tool speed", "joint speed", "joint acceleration", "joint jerk", "torque", "tube")
 OBJECTIVES = ("time", "effort", "jerk")
 """The objective's terms (s, N²·m²·s, rad²/s⁵), in the order of their weights in p."""
-TIMED = {"free": 0, "bounded": 1, "total": 1}
-"""Rows of time per timing but "segments" (one a segment)."""
 _POINTS, _WEIGHTS = np.polynomial.legendre.leggauss(4)
 TIME_QUADRATURE = ((_POINTS + 1) / 2, _WEIGHTS / 2)
 """Gauss–Legendre points (fractions of an interval) and weights of the time ∫ du / √β: on
@@ -236,7 +234,7 @@ def build(
         rows += _continuity(ends[k], ends[k + 1])
         low += [0.0] * 5
         high += [0.0] * 5
-    timed = segment_times if timing == "segments" else [integrals["time"]] * TIMED[timing]
+    timed = {"free": [], "segments": segment_times}.get(timing, [integrals["time"]])
     rows += timed
     low += [-np.inf] * len(timed)
     high += [np.inf] * len(timed)

@@ -97,11 +97,11 @@ def objectives(settings: OcpSettings) -> tuple[str, ...]:
     return tuple(name for name in OBJECTIVES if weighed[name] > 0.0)
 
 
-def _weights(settings: OcpSettings, at_start: np.ndarray) -> np.ndarray:
+def _weights(settings: OcpSettings, weighed: tuple[str, ...], at_start: np.ndarray) -> np.ndarray:
     """The objective's weights (:data:`OBJECTIVES`'s order), each over its term's value at
-    the start, so that the settings' weights compare like with like."""
+    the start, so that the settings' weights compare like with like; 0 but ``weighed``."""
     given = np.array([settings.time_weight, settings.energy_weight, settings.jerk_weight])
-    return np.where(np.isin(OBJECTIVES, objectives(settings)), given / at_start, 0.0)
+    return np.where(np.isin(OBJECTIVES, weighed), given / at_start, 0.0)
 
 
 def _limits(problem: Problem, bounds: PlannerBounds) -> np.ndarray:
@@ -220,14 +220,15 @@ def plan_in_path_coordinates(
         ZONES,
     )
     intervals = len(paths[0].nodes) - 1
-    nlp = build(len(paths), intervals, objectives(settings), settings.timing)
-    shape = (len(paths), intervals, objectives(settings), settings.timing)
+    weighed = objectives(settings)
+    nlp = build(len(paths), intervals, weighed, settings.timing)
+    shape = (len(paths), intervals, weighed, settings.timing)
     solved = SOLVED.get(warm_start) if warm_start is not None else None
     continued = solved is not None and solved[0] == shape
     along = _path_parameters(problem, paths)  # the limits change between rounds, not these
     unweighted = np.concatenate([along, limits, np.ones(len(OBJECTIVES))])
     start = _retimed(problem, nlp, _start(paths, limits), unweighted, settings.timing)
-    weights = _weights(settings, nlp.integrals(start, unweighted)[0].full().ravel())
+    weights = _weights(settings, weighed, nlp.integrals(start, unweighted)[0].full().ravel())
     guess = solved[1] if continued else {"x0": start}
     statistics: dict[str, Any] = {"iterations": 0, "solve_time_s": 0.0, "function_time_s": 0.0}
     statistics["construction_time_s"] = time.perf_counter() - started

@@ -95,15 +95,6 @@ class OcpSettings:
         return settings_from_options(name, defaults, options, cls._RANGES, choices)
 
     @property
-    def minimum_time(self) -> bool:
-        """Whether the objective is the time alone (the jerk's weight a tie-breaker)."""
-        return (
-            self.timing == "free"
-            and self.energy_weight == 0.0
-            and self.jerk_weight <= MIN_TIME_JERK_WEIGHT
-        )
-
-    @property
     def path_grid(self) -> tuple[int, int]:
         """In path coordinates: the intervals of each end zone and of the middle."""
         return self.corner_nodes, self.path_intervals or self.nodes_per_phase
