@@ -18,10 +18,11 @@ batch torque. Then, per planner, a freshly loaded problem and:
   ``construction_time_s`` of the first plan after clearing the ocp package's caches
   (``nlp.interval``, ``nlp.symbolic_functions``, ``nlp.formulation_key``,
   ``nlp.build_nlp``, ``ipopt.solver``, ``refinement.probe``, and in path coordinates
-  ``path_nlp.build``, ``path_planner.solver``): building the interval's
-  functions, the NLP assembled from them and the IPOPT solver, and generating the C of the
-  interval's functions (the compiler then runs in the background unless the library is
-  already in the disk cache). The other planners build nothing ahead: for them it is the
+  ``path_nlp.interval_functions``, ``path_nlp.landmark_functions``, ``path_solver.path_nlp``,
+  ``path_solver.solver``, ``path_solver.formulation_key``): building the interval's
+  functions, the NLP assembled from them and the solver (IPOPT or FATROP), and generating
+  the C of the interval's functions (the compiler then runs in the background unless the
+  library is already in the disk cache). The other planners build nothing ahead: for them it is the
   time of the ``load_problem`` of the fresh problem (the JSON has ``load_s`` for every
   planner).
 - cached s (ocp-* only): the same construction once the compiled library is on disk (the
@@ -44,13 +45,14 @@ batch torque. Then, per planner, a freshly loaded problem and:
   ``spm_opt.evaluate`` of the cold plan, once, outside the timing.
 - ratio: median s over the cubic's median s.
 
-Under the table, for each ocp-* planner (its transcription and its NLP's size: the KKT
-system's variables and constraint rows), the median plan wall time is split into function
-evaluation, IPOPT's own work (solve − function evaluation: linear algebra, line search) and
-Python around the solve (wall − solve: initial guess, bounds, constraint report, torque
-check, trajectory, registry). When an ocp-* planner without an energy term has to solve
-again with the torque limit, its solve time and iterations add both solves but its
-construction and function-evaluation times are the second's only; the row is marked.
+Under the table, for each ocp-* planner (its transcription, its solver and its NLP's size:
+the KKT system's variables and constraint rows), the median plan wall time is split into
+function evaluation, the solver's own work (IPOPT's or FATROP's: solve − function
+evaluation: linear algebra, line search) and Python around the solve (wall − solve:
+initial guess, bounds, constraint report, torque check, trajectory, registry). When an
+ocp-* planner without an energy term has to solve again with the torque limit, its solve
+time and iterations add both solves but its construction and function-evaluation times
+are the second's only; the row is marked.
 A planner that raises gets a row with its error; the others still run.
 """
 
@@ -71,7 +73,7 @@ from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.model import dynamics
-from spm_opt.planners.ocp import ipopt, nlp, nlp_library, path_nlp, path_planner, refinement
+from spm_opt.planners.ocp import ipopt, nlp, nlp_library, path_nlp, path_solver, refinement
 from spm_opt.planners.ocp.planner import OcpPlanner
 
 REFERENCE = "cubic"
@@ -118,8 +120,11 @@ def clear_ocp_caches() -> None:
         nlp.build_nlp,
         ipopt.solver,
         refinement.probe,
-        path_nlp.build,
-        path_planner.solver,
+        path_nlp.interval_functions,
+        path_nlp.landmark_functions,
+        path_solver.path_nlp,
+        path_solver.solver,
+        path_solver.formulation_key,
     ):
         cached.cache_clear()
 
@@ -200,6 +205,7 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
             cold_iterations=int(cold["iterations"]),
             torque_resolve=resolved,
             transcription=cold.get("transcription"),
+            solver=cold.get("solver", "ipopt"),
             variables=cold.get("variables"),
             rows=cold.get("rows"),
         )
@@ -251,12 +257,13 @@ def print_breakdown(results: dict[str, dict[str, Any]]) -> None:
         wall = r["median_plan_s"]
         parts = (
             ("function evaluation", r["median_function_s"]),
-            ("IPOPT's own", r["median_ipopt_own_s"]),
+            (f"{r['solver']}'s own", r["median_ipopt_own_s"]),
             ("Python around the solve", r["median_around_solve_s"]),
         )
         shares = ", ".join(f"{what} {s:.3g} s ({100 * s / wall:.0f} %)" for what, s in parts)
         size = f"{r['variables']} variables, {r['rows']} rows" if r.get("rows") else "size -"
-        print(f"{name} ({r.get('transcription')}; {size}) median wall {wall:.3g} s: {shares}")
+        solved = f"{r.get('transcription')}, {r['solver']}; {size}"
+        print(f"{name} ({solved}) median wall {wall:.3g} s: {shares}")
 
 
 def main() -> None:

@@ -37,7 +37,9 @@ def test_min_time_meets_every_limit_on_the_contour(paper_problem, min_time):
     """Within every limit, inside the tube (0.1 mm less the 0.03 mm execution reserve), and
     through every landmark within 0.01 mm."""
     assert_within_limits(paper_problem, min_time, landmark_tolerance=0.01 * MM)
-    assert min_time.metadata["statistics"]["status"] == "Solve_Succeeded"
+    statistics = min_time.metadata["statistics"]
+    converged = {"ipopt": "Solve_Succeeded", "fatrop": "Success"}
+    assert statistics["status"] == converged[statistics.get("solver", "ipopt")]
 
 
 def test_min_time_is_near_the_lower_bound(paper_problem, min_time):

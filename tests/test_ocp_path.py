@@ -3,6 +3,7 @@ checks written here."""
 
 import dataclasses
 
+import casadi as ca
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,9 +12,13 @@ from plan_checks import assert_within_limits, cut_points, on_contour, sample
 
 import spm_opt as so
 from spm_opt.bounds import segment_lower_bounds
+from spm_opt.limits import planner_bounds
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
+from spm_opt.planners.ocp import path_planner
 from spm_opt.planners.ocp.path_geometry import path_map, segment_paths
+from spm_opt.planners.ocp.path_solver import path_nlp
+from spm_opt.planners.registry import get_planner
 
 ZONE = st.one_of(st.just(0.0), st.floats(0.01, 0.45))
 
@@ -162,3 +167,95 @@ def test_path_coordinates_without_a_tube_stay_within_a_millimetre(hardware_probl
     cut = on_contour(problem, cut_points(q, problem.surface.radius), problem.surface.radius)
     # the offset is the distance to first order: 1 mm of it moved the cut 1.001 mm
     assert 0.1 * MM < np.max(cut.distance) <= 1.0 * MM * (1 + 1e-2)
+
+
+def _random_point(problem, planner, seed):
+    """The stage-wise NLP of ``planner`` on ``problem``, its parameters and a random x
+    and multipliers near the start."""
+    settings = get_planner(planner).settings(problem)
+    limits = path_planner._limits(problem, planner_bounds(problem, settings.margin))
+    paths = segment_paths(
+        problem, tuple(limits[:4]), path_planner.PATH_SAMPLES, settings.path_grid, (2.0, 0.5)
+    )
+    layout, nlp = path_nlp(
+        len(paths), len(paths[0].nodes) - 1, path_planner.objectives(settings), settings.timing
+    )
+    rng = np.random.default_rng(seed)
+    p = np.concatenate([path_planner._path_parameters(problem, paths), limits, rng.random(3)])
+    x = path_planner._start(paths, limits, layout) * (1 + 0.1 * rng.random(layout.size))
+    x += 0.01 * rng.standard_normal(layout.size)
+    return nlp, x, p, rng.standard_normal(layout.rows)
+
+
+@pytest.mark.parametrize("planner", ["ocp-min-time", "ocp-min-jerk"])
+def test_the_assembled_derivatives_are_casadis_own(paper_problem, planner):
+    """The stage-wise NLP's Jacobian, gradient and Hessian (the intervals' and the
+    landmarks' scattered; with minimum jerk's time row) equal CasADi's automatic
+    derivatives of its f and g, at a random point."""
+    nlp, x0, p0, lam = _random_point(paper_problem, planner, 3)
+    x, p, f, g = (nlp.problem[k] for k in "xpfg")
+    automatic = ca.Function(
+        "automatic",
+        [x, p],
+        [
+            ca.jacobian(g, x),
+            ca.gradient(f, x),
+            ca.triu(ca.hessian(0.7 * f + ca.dot(ca.DM(lam), g), x)[0]),
+        ],
+    )
+    jac, grad, hess = (value.full() for value in automatic(x0, p0))
+    derivatives = nlp.derivatives
+    np.testing.assert_allclose(derivatives["jac_g"](x0, p0)[1].full(), jac, atol=1e-9)
+    np.testing.assert_allclose(derivatives["grad_f"](x0, p0)[1].full(), grad, atol=1e-12)
+    np.testing.assert_allclose(
+        derivatives["hess_lag"](x0, p0, 0.7, lam).full(), hess, atol=1e-9 * np.max(abs(hess))
+    )
+
+
+def test_fatrop_and_ipopt_find_the_same_minimum_time(paper_problem):
+    """Minimum time solves with FATROP by default; IPOPT, asked for, reaches the same
+    duration (1 ms of 38 s) on the same stage-wise NLP."""
+    fatrop = so.plan(paper_problem, "ocp-min-time")
+    problem = dataclasses.replace(
+        paper_problem, planner_options={"ocp-min-time": {"solver": "ipopt"}}
+    )
+    by_ipopt = so.plan(problem, "ocp-min-time")
+    assert fatrop.metadata["statistics"]["solver"] == "fatrop"
+    assert by_ipopt.metadata["statistics"]["solver"] == "ipopt"
+    assert fatrop.duration == pytest.approx(by_ipopt.duration, abs=1e-3)
+    assert_within_limits(paper_problem, fatrop)
+
+
+def test_a_solver_that_stops_early_is_named_with_the_one_after_it(paper_problem):
+    """Five iterations are too few: FATROP stops, IPOPT tries from the same start and
+    stops too, and the error names both."""
+    problem = dataclasses.replace(
+        paper_problem, planner_options={"ocp-min-time": {"max_iterations": 5}}
+    )
+    with pytest.raises(so.PlanningError, match="fatrop stopped .* ipopt stopped"):
+        so.plan(problem, "ocp-min-time")
+
+
+def test_fatrop_with_a_fixed_timing_is_refused(paper_problem):
+    """FATROP reads rows of one stage; a fixed timing's time row spans them all."""
+    problem = dataclasses.replace(
+        paper_problem, planner_options={"ocp-min-jerk": {"solver": "fatrop"}}
+    )
+    with pytest.raises(so.InputError, match="solver = 'fatrop': needs timing = 'free'"):
+        so.plan(problem, "ocp-min-jerk")
+
+
+def test_a_cut_of_one_segment_has_no_landmark_to_pass(paper_problem):
+    """An open cut through two landmarks: one segment, no continuity rows; FATROP (minimum
+    time) and IPOPT (minimum energy) plan it within every limit."""
+    problem = dataclasses.replace(
+        paper_problem,
+        landmark_names=paper_problem.landmark_names[:2],
+        landmarks=paper_problem.landmarks[:2],
+        closed=False,
+        segment_durations=np.array([10.0]),
+    )
+    for planner, solver in (("ocp-min-time", "fatrop"), ("ocp-min-energy", "ipopt")):
+        plan = so.plan(problem, planner)
+        assert plan.metadata["statistics"]["solver"] == solver
+        assert_within_limits(problem, plan)

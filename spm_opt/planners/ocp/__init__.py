@@ -1,12 +1,15 @@
 """Optimal-control planners: minimum time, energy or jerk through the landmarks, on the cut,
-within the actuators' limits (CasADi + IPOPT).
+within the actuators' limits (CasADi + FATROP or IPOPT).
 
 Two transcriptions. Where the problem has a contour tube, every planner works in path
 coordinates (:mod:`~spm_opt.planners.ocp.path_planner`): the contour's arc length is the
 independent variable, the cut's speed along it and a lateral offset within the tube are the
-states, and there are no free durations, so IPOPT converges in 23-32 iterations (56 to 111
-in the time domain on the paper's flap) to a cut that passes the landmarks without
+states, and there are no free durations, so the solver converges in 24-33 iterations (56 to
+111 in the time domain on the paper's flap) to a cut that passes the landmarks without
 stopping; the objectives over time are integrals over the arc length with dt = du / √β.
+The NLP is assembled stage by stage (:mod:`~spm_opt.planners.ocp.path_assembly`); FATROP,
+which exploits that structure, solves it where the timing is free (minimum time, the mix),
+IPOPT where a row holds the time (:mod:`~spm_opt.planners.ocp.path_solver`).
 Without a tube (the hardware run, which cuts nothing) they transcribe the motion on a grid
 of phases whose durations are variables (:mod:`~spm_opt.planners.ocp.transcription`), the
 cut free in joint space; ``transcription`` in ``[planner.NAME]`` chooses either. Every limit

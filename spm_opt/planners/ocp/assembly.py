@@ -135,7 +135,7 @@ def assemble(
     _, term, jac_rows, grad_term = jacobian.map(m)(*arguments)
     jac_g = _jacobian(grid, jacobian, columns, scale, n_g, n)(ca.vertcat(jac_rows.nz[:], 1.0))
     duration_gradient = ca.vertcat(ca.DM.zeros(n - phases), ca.DM.ones(phases))
-    gradient = _scatter(columns.ravel(), np.zeros(columns.size, int), scale.ravel(), (n, 1))
+    gradient = scatter(columns.ravel(), np.zeros(columns.size, int), scale.ravel(), (n, 1))
     grad_f = gradient(ca.vec(grad_term)) + time_weight * duration_gradient
 
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_g)
@@ -176,7 +176,7 @@ def _interval_columns(grid: Grid, n: int) -> tuple[np.ndarray, np.ndarray]:
     return columns, scale
 
 
-class _Scatter:
+class Scatter:
     """global nonzeros = T @ source values, as an MX sparse matrix of a fixed sparsity."""
 
     def __init__(self, rows, cols, factors, sources, shape, n_sources) -> None:
@@ -196,14 +196,14 @@ class _Scatter:
         return ca.sparsity_cast(self.matrix @ values, self.sparsity)
 
 
-def _scatter(rows, cols, factors, shape) -> _Scatter:
+def scatter(rows, cols, factors, shape) -> Scatter:
     """A scatter of one source value per triplet, in the triplets' order."""
-    return _Scatter(rows, cols, factors, np.arange(len(rows)), shape, len(rows))
+    return Scatter(rows, cols, factors, np.arange(len(rows)), shape, len(rows))
 
 
 def _jacobian(
     grid: Grid, jacobian: ca.Function, columns: np.ndarray, scale: np.ndarray, n_g: int, n: int
-) -> _Scatter:
+) -> Scatter:
     """The constraints' Jacobian from the intervals' (their nonzeros, then a 1 for the
     linear entries: +1 on the next node's state, the segment and total rows)."""
     pattern = jacobian.sparsity_out(2)
@@ -225,7 +225,7 @@ def _jacobian(
     linear = len(rows[1]) + len(segment_rows) + phases
     factors.append(np.ones(linear))
     sources.append(np.full(linear, one))
-    return _Scatter(
+    return Scatter(
         np.concatenate(rows),
         np.concatenate(cols),
         np.concatenate(factors),
@@ -235,7 +235,7 @@ def _jacobian(
     )
 
 
-def _hessian(hessian: ca.Function, columns: np.ndarray, scale: np.ndarray, n: int) -> _Scatter:
+def _hessian(hessian: ca.Function, columns: np.ndarray, scale: np.ndarray, n: int) -> Scatter:
     """The Lagrangian's Hessian (upper triangle) from the intervals' (the phase durations'
     block sums its intervals'). x's columns grow along z, so upper stays upper."""
     pattern = hessian.sparsity_out(0)
@@ -243,7 +243,7 @@ def _hessian(hessian: ca.Function, columns: np.ndarray, scale: np.ndarray, n: in
     m, per_interval = columns.shape[0], pattern.nnz()
     k = np.repeat(np.arange(m), per_interval)
     first, second = np.tile(local_rows, m), np.tile(local_columns, m)
-    return _Scatter(
+    return Scatter(
         columns[k, first],
         columns[k, second],
         scale[k, first] * scale[k, second],

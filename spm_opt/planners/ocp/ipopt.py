@@ -16,8 +16,9 @@ benchmarks/ocp_solvers.py``, interpreted, idle 2-core machine): with its default
 stopped after 972 iterations without converging; with a small initial barrier and bound
 push (its barrier is monotone) it took 276 iterations and 1.8 s, against IPOPT's 40
 iterations and 0.13 s on this package's NLP (IPOPT on the stage-wise NLP: 405 and 3.8 s).
-IPOPT stays, and FATROP is not offered: the stage-wise form costs IPOPT ten times the
-iterations, and FATROP needs more still.
+IPOPT stays for the time domain: the stage-wise form costs IPOPT ten times the
+iterations, and FATROP needs more still. In path coordinates, with no free durations,
+FATROP does pay (:mod:`~spm_opt.planners.ocp.path_solver`).
 """
 
 from __future__ import annotations

@@ -15,11 +15,12 @@ when the C is too big to compile (:data:`MAX_SOURCE_BYTES`), the solver stays in
 and one warning says so. A process that ends during a build waits for it, so that the next
 one finds the library.
 
-Besides the functions, the library holds the reverse derivative of the first (the value
-function): CasADi's ``nlpsol`` asks for it when it is created, even with every derivative
-given. Building the paper's minimum-time interval library takes about 1 s at -O1, the
-minimum-jerk one (three check points) 2.5 s, the one with the torque table 12 s (36 MB of
-C, most of it the table's coefficients); loading takes milliseconds.
+Besides the functions, the library holds the reverse derivatives of the value functions
+(the first, unless the caller names others): CasADi's ``nlpsol`` asks for them when it is
+created, even with every derivative given. Building the paper's minimum-time interval
+library takes about 1 s at -O1, the minimum-jerk one (three check points) 2.5 s, the one
+with the torque table 12 s (36 MB of C, most of it the table's coefficients); loading takes
+milliseconds.
 """
 
 from __future__ import annotations
@@ -126,6 +127,7 @@ def nlp_solver(
     assemble: Callable[[list[ca.Function]], tuple[dict[str, Any], dict[str, Any]]],
     options: dict[str, Any],
     background: bool = True,
+    reversed_: tuple[int, ...] = (0,),
 ) -> Solver:
     """``nlpsol(name, plugin, nlp, {**options, **derivatives})`` with ``nlp, derivatives =
     assemble(fs)``, where ``fs`` are ``functions()`` compiled.
@@ -133,7 +135,8 @@ def nlp_solver(
     ``key`` identifies what ``functions`` returns (functions named ``names``) without
     calling it; with ``background`` a missing library is compiled in a thread while the
     solver returned runs the SX functions (:func:`wait_for_builds` waits for it), else
-    before returning.
+    before returning. The library also holds the reverse derivatives of the functions at
+    ``reversed_`` (those whose rows are the NLP's g).
     """
     started = time.perf_counter()
 
@@ -157,7 +160,7 @@ def nlp_solver(
             _LOG.warning("%s does not load (%s); building it again", library.name, error)
             library.unlink(missing_ok=True)
     symbolic = functions()
-    pending = _start_build(chosen, library, symbolic)
+    pending = _start_build(chosen, library, symbolic, reversed_)
     if pending is not None and not background:
         pending.result()
         if library.exists():
@@ -183,14 +186,16 @@ def wait_for_builds() -> None:
     wait(pending)
 
 
-def _start_build(chosen: str, library: Path, functions: list[ca.Function]) -> Future | None:
+def _start_build(
+    chosen: str, library: Path, functions: list[ca.Function], reversed_: tuple[int, ...]
+) -> Future | None:
     """Generate the C here (CasADi is not thread-safe) and compile it in the build thread,
     unless this process has built or is building ``library``; the build's future (None
     when there is nothing to compile)."""
     with _lock:
         if library in _builds:
             return _builds[library]
-    source = _source(library, functions)
+    source = _source(library, functions, reversed_)
     if source is None:
         return None
     with _lock:
@@ -199,7 +204,7 @@ def _start_build(chosen: str, library: Path, functions: list[ca.Function]) -> Fu
     return future
 
 
-def _source(library: Path, functions: list[ca.Function]) -> Path | None:
+def _source(library: Path, functions: list[ca.Function], reversed_: tuple[int, ...]) -> Path | None:
     """The C for ``library`` in a new temporary directory; None (with a warning) when it
     cannot be generated or is too big to compile, which a marker next to the library
     remembers."""
@@ -207,7 +212,7 @@ def _source(library: Path, functions: list[ca.Function]) -> Path | None:
     if not too_big.exists():
         directory = Path(tempfile.mkdtemp(prefix="spm_opt_nlp_"))
         try:
-            source = _generate(functions, directory, library.stem)
+            source = _generate(functions, reversed_, directory, library.stem)
         except RuntimeError as error:
             shutil.rmtree(directory, ignore_errors=True)
             _LOG.warning("no C for %s, the NLP stays interpreted: %s", library.name, error)
@@ -222,10 +227,13 @@ def _source(library: Path, functions: list[ca.Function]) -> Path | None:
     return None
 
 
-def _generate(functions: list[ca.Function], directory: Path, stem: str) -> Path:
-    """The C of ``functions`` and of the first one's reverse derivative, in ``directory``."""
+def _generate(
+    functions: list[ca.Function], reversed_: tuple[int, ...], directory: Path, stem: str
+) -> Path:
+    """The C of ``functions`` and of the reverse derivatives of those at ``reversed_``, in
+    ``directory``."""
     generator = ca.CodeGenerator(f"{stem}.c")
-    for function in [*functions, functions[0].reverse(1)]:
+    for function in [*functions, *(functions[k].reverse(1) for k in reversed_)]:
         generator.add(function)
     generator.generate(f"{directory}{os.sep}")
     return directory / f"{stem}.c"

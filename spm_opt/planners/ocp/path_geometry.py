@@ -99,12 +99,9 @@ class SegmentPath:
         """ds/du at the segment's two ends (2,)."""
         return path_map(np.array([0.0, 1.0]), self.zones)[1]
 
-    def terms(self, problem: Problem, u: np.ndarray) -> dict[str, np.ndarray]:
-        """At grid coordinates u (N,), mm: q₀ and its u-derivatives A1–A3 (N, 2), v and
-        its u-derivatives v1–v3, the cut point's speed metric G (N, 3: G11, G12, G22,
-        mm²/rad², |ṡ_cut|² = q̇ᵀGq̇), and the model's terms at q₀ moving along the path
-        (toppra's: inertia with the rotors' (N, 4), Coriolis and centrifugal per unit u̇²,
-        gravity, friction (N, 2))."""
+    def geometry(self, u: np.ndarray) -> dict[str, np.ndarray]:
+        """At grid coordinates u (N,), mm: q₀ and its u-derivatives A1–A3 (N, 2), and v and
+        its u-derivatives v1–v3."""
         length = self.length
         g, g1, g2, g3 = path_map(np.asarray(u, dtype=float) / length, self.zones)
         s = np.clip(g * length, 0.0, length)
@@ -114,32 +111,46 @@ class SegmentPath:
             d0, d1, d2, d3 = (spline(s, order) for order in range(4))
             return d0, d1 * g1, d2 * g1**2 + d1 * g2, d3 * g1**3 + 3 * d2 * g1 * g2 + d1 * g3
 
-        q, a1, a2, a3 = along(self.joints)
-        v, v1, v2, v3 = along(self.lateral)
-        points = path_points(problem, q, a1, a2)
-        return {
-            "q": q,
-            "A1": a1,
-            "A2": a2,
-            "A3": a3,
-            "v": v,
-            "v1": v1,
-            "v2": v2,
-            "v3": v3,
-            "G": _speed_metric(problem, q),
-            "inertia": points.inertia.reshape(-1, 4),
-            "bias": points.bias,
-            "gravity": points.gravity,
-            "friction": points.friction,
-        }
+        names = ("q", "A1", "A2", "A3", "v", "v1", "v2", "v3")
+        return dict(zip(names, (*along(self.joints), *along(self.lateral)), strict=True))
+
+
+def path_terms(
+    problem: Problem, paths: list[SegmentPath], us: list[np.ndarray]
+) -> list[dict[str, np.ndarray]]:
+    """For each path, at its grid coordinates u (N,), mm: its :meth:`SegmentPath.geometry`,
+    the cut point's speed metric G (N, 3: G11, G12, G22, mm²/rad², |ṡ_cut|² = q̇ᵀGq̇), and
+    the model's terms at q₀ moving along the path (toppra's: inertia with the rotors'
+    (N, 4), Coriolis and centrifugal per unit u̇², gravity, friction (N, 2)); the model
+    evaluated once for all paths."""
+    parts = [path.geometry(u) for path, u in zip(paths, us, strict=True)]
+    q, a1, a2 = (np.concatenate([part[name] for part in parts]) for name in ("q", "A1", "A2"))
+    points = path_points(problem, q, a1, a2)
+    model = {
+        "G": _speed_metric(problem, q),
+        "inertia": points.inertia.reshape(-1, 4),
+        "bias": points.bias,
+        "gravity": points.gravity,
+        "friction": points.friction,
+    }
+    ends = np.cumsum([0] + [len(u) for u in us])
+    return [
+        {**part, **{name: values[start:end] for name, values in model.items()}}
+        for part, start, end in zip(parts, ends[:-1], ends[1:], strict=True)
+    ]
 
 
 def _speed_metric(problem: Problem, q: np.ndarray) -> np.ndarray:
-    """(G11, G12, G22) (N, 3), mm²/rad²: the cut point's squared speed per joint rates."""
-    speed = problem.contour.joint_tool_speed
-    unit = [np.broadcast_to(rates, q.shape) for rates in ((1.0, 0.0), (0.0, 1.0), (1.0, 1.0))]
-    first, second, both = (speed(q, rates) / MM for rates in unit)
-    return np.column_stack([first**2, (both**2 - first**2 - second**2) / 2, second**2])
+    """(G11, G12, G22) (N, 3), mm²/rad²: the cut point's squared speed per joint rates,
+    ρ² JᵀJ + (Jᵀ∇ρ)(Jᵀ∇ρ)ᵀ with J the platform direction's Jacobian (|Ṗ|² = ρ²|ṗ|² + (∇ρ·ṗ)²,
+    ṗ = J q̇)."""
+    jacobian = kinematics.platform_jacobian(q, 1.0)  # (N, 3, 2)
+    directions = kinematics.forward_kinematics(q, 1.0)
+    radius, gradient = problem.contour.surface.radius_gradient(directions)
+    slope = np.einsum("nk,nki->ni", gradient, jacobian)
+    metric = radius[:, None, None] ** 2 * np.einsum("nki,nkj->nij", jacobian, jacobian)
+    metric += slope[:, :, None] * slope[:, None, :]
+    return np.column_stack([metric[:, 0, 0], metric[:, 0, 1], metric[:, 1, 1]]) / MM**2
 
 
 def _ramp_length(joints: CubicSpline, length: float, bounds_speed: tuple[float, ...]) -> float:

@@ -26,7 +26,6 @@ timing, rows hold the total time or each segment's.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
@@ -60,41 +59,6 @@ MIN_BETA = 1e-8
 """Least u̇², mm²/s², anywhere."""
 SMOOTHING = 1e-9
 """Weight of ∫ d'''² du (mm⁻⁵·mm) beside the time (s)."""
-
-
-@dataclass(frozen=True)
-class PathNlp:
-    """A built NLP: CasADi's problem, each row's bounds, and the shapes to read x by."""
-
-    problem: dict[str, ca.SX]
-    low: np.ndarray
-    high: np.ndarray
-    segments: int
-    intervals: int
-    integrals: ca.Function
-    """(x, p) → the :data:`OBJECTIVES`' values (3,) and each segment's time (segments,)."""
-    timed: int
-    """Rows of time at the end of g: the total's, or each segment's."""
-
-    def row_bounds(self, durations: np.ndarray, timing: str) -> tuple[np.ndarray, np.ndarray]:
-        """The rows' bounds, the time rows' from ``timing`` and the problem's segment
-        durations (s)."""
-        low, high = self.low.copy(), self.high.copy()
-        if self.timed:
-            held = durations if timing == "segments" else np.array([np.sum(durations)])
-            low[-self.timed :] = 0.0 if timing == "bounded" else held
-            high[-self.timed :] = held
-        return low, high
-
-    @property
-    def per_segment(self) -> int:
-        return STATE * (self.intervals + 1) + CONTROL * self.intervals
-
-    def split(self, x: np.ndarray, segment: int) -> tuple[np.ndarray, np.ndarray]:
-        """Segment ``segment``'s node states (N + 1, 5) and controls (N, 2) in x (views)."""
-        part = x[segment * self.per_segment : (segment + 1) * self.per_segment]
-        nodes = STATE * (self.intervals + 1)
-        return part[:nodes].reshape(-1, STATE), part[nodes:].reshape(-1, CONTROL)
 
 
 def advance(state: Sequence[Any], control: Sequence[Any], h: Any) -> list[Any]:
@@ -156,103 +120,125 @@ def _interval_hulls(state: ca.SX, control: ca.SX, h: ca.SX, tube: ca.SX) -> ca.S
     )
 
 
-@cache
-def build(
-    segments: int, intervals: int, objectives: tuple[str, ...] = ("time",), timing: str = "free"
-) -> PathNlp:
-    """The NLP for ``segments`` segments of ``intervals`` intervals each, its objective the
-    weighted ``objectives`` (of :data:`OBJECTIVES`), with ``timing``'s rows of time; p
-    stacks, per segment, the terms at every place, the interval lengths and the ends'
-    terms, then the limits (:data:`LIMITS` and the drives' viscous friction), then the
-    weights of :data:`OBJECTIVES`."""
-    places = intervals * (len(PLACES) + 1)
-    per_segment_p = places * PER_PLACE + intervals + PER_END
-    per_segment_x = STATE * (intervals + 1) + CONTROL * intervals
-    x = ca.SX.sym("x", segments * per_segment_x)
-    p = ca.SX.sym("p", segments * per_segment_p + len(LIMITS) + 2 + len(OBJECTIVES))
-    limits = p[segments * per_segment_p : -len(OBJECTIVES)]
-    weights = p[-len(OBJECTIVES) :]
-    rows: list[ca.SX] = []
-    low: list[float] = []
-    high: list[float] = []
-    integrals = {name: ca.SX(0) for name in OBJECTIVES}
-    smoothing = ca.SX(0)
-    segment_times = []
-    ends = []
-    for k in range(segments):
-        segment_time = ca.SX(0)
-        xs = x[k * per_segment_x : (k + 1) * per_segment_x]
-        states = ca.reshape(xs[: STATE * (intervals + 1)], STATE, intervals + 1)
-        controls = ca.reshape(xs[STATE * (intervals + 1) :], CONTROL, intervals)
-        ps = p[k * per_segment_p : (k + 1) * per_segment_p]
-        lengths = ps[places * PER_PLACE : places * PER_PLACE + intervals]
-        for i in range(intervals):
-            h, state, control = lengths[i], states[:, i], controls[:, i]
-            rows.append(
-                states[:, i + 1]
-                - ca.vertcat(*advance(ca.vertsplit(state), ca.vertsplit(control), h))
-            )
-            low += [0.0] * STATE
-            high += [0.0] * STATE
-            rows.append(_interval_hulls(state, control, h, limits[5]))
-            low += [-1.0, -1.0, MIN_BETA]
-            high += [1.0, 1.0, np.inf]
-            per_time = [
-                weight * h / _root(advance(ca.vertsplit(state), ca.vertsplit(control), at * h)[0])
-                for at, weight in zip(*TIME_QUADRATURE, strict=True)
-            ]
-            segment_time += sum(per_time)
-            rates: dict[str, list[ca.SX]] = {name: [] for name in OBJECTIVES[1:]}
-            smoothing += h * control[1] ** 2
-            for j, fraction in enumerate((*PLACES, 1.0)):
-                start = (i * (len(PLACES) + 1) + j) * PER_PLACE
-                at = _rows_at(
-                    ps[start : start + PER_PLACE],
-                    advance(ca.vertsplit(state), ca.vertsplit(control), fraction * h),
-                    control,
-                    limits,
-                )
-                for name, values in rates.items():
-                    values.append(at.pop(name))
-                if fraction == 1.0:
-                    rows.append(at["joint jerk"])
-                    low += [-1.0] * 2
-                    high += [1.0] * 2
-                    continue
-                rows.append(ca.vertcat(*at.values()))
-                low += [-np.inf] * 3 + [-1.0] * 6
-                high += [1.0] * 9
-            for name, values in rates.items():  # the rate's parabola at the Gauss points
-                at_points = INTERPOLATION @ ca.vertcat(*values)
-                integrals[name] += sum(at_points[g] * per_time[g] for g in range(len(per_time)))
-        integrals["time"] += segment_time
-        segment_times.append(segment_time)
-        ends.append(
-            (states[:, 0], states[:, intervals], ps[places * PER_PLACE + intervals :], limits)
+INTERVAL_FUNCTIONS = ("path_interval_value", "path_interval_jacobian", "path_interval_hessian")
+"""Names of one interval's value, Jacobian and Hessian (and of their compiled C)."""
+LANDMARK_FUNCTIONS = ("path_landmark_value", "path_landmark_jacobian", "path_landmark_hessian")
+"""Names of the continuity rows' value, Jacobian and Hessian at a landmark passed."""
+Z = STATE + CONTROL
+"""An interval's variables: its first node's state and its control."""
+INTERVAL_PARAMETERS = (len(PLACES) + 1) * PER_PLACE
+"""An interval's path terms: at its start, middle and end."""
+LIMIT_PARAMETERS = len(LIMITS) + 2
+"""The limits (:data:`LIMITS`) and the drives' viscous friction."""
+INTERVAL_LOW = np.array(
+    [0.0] * STATE + [-1.0, -1.0, MIN_BETA] + ([-np.inf] * 3 + [-1.0] * 6) * 2 + [-1.0] * 2
+)
+INTERVAL_HIGH = np.array([0.0] * STATE + [1.0, 1.0, np.inf] + [1.0] * 9 * 2 + [1.0] * 2)
+"""Bounds of an interval's rows: its next node's state (the gap, 5), the hulls (3), the
+motion's rows at its start and middle (9 each) and the jerk at its end (2)."""
+LANDMARK_ROWS = 5
+"""Continuity rows at a landmark passed."""
+
+
+def _interval(objectives: tuple[str, ...]) -> tuple[list[ca.SX], ca.SX, ca.SX, ca.SX, ca.SX]:
+    """One interval's inputs (z, h, terms, limits, weights) and, from them, its rows (the
+    gap's −advance, then the limits'), its integrals (:data:`OBJECTIVES`) and its objective
+    term (the weighted ``objectives`` and the offset's smoothing)."""
+    z, h = ca.SX.sym("z", Z), ca.SX.sym("h")
+    terms = ca.SX.sym("terms", INTERVAL_PARAMETERS)
+    limits, weights = ca.SX.sym("limits", LIMIT_PARAMETERS), ca.SX.sym("weights", len(OBJECTIVES))
+    state, control = ca.vertsplit(z[:STATE]), ca.vertsplit(z[STATE:])
+    rows = [-ca.vertcat(*advance(state, control, h)), _interval_hulls(state, control, h, limits[5])]
+    per_time = [
+        weight * h / _root(advance(state, control, at * h)[0])
+        for at, weight in zip(*TIME_QUADRATURE, strict=True)
+    ]
+    rates: dict[str, list[ca.SX]] = {name: [] for name in OBJECTIVES[1:]}
+    for j, fraction in enumerate((*PLACES, 1.0)):
+        at = _rows_at(
+            terms[j * PER_PLACE : (j + 1) * PER_PLACE],
+            advance(state, control, fraction * h),
+            z[STATE:],
+            limits,
         )
-    for k in range(segments - 1):
-        rows += _continuity(ends[k], ends[k + 1])
-        low += [0.0] * 5
-        high += [0.0] * 5
-    timed = {"free": [], "segments": segment_times}.get(timing, [integrals["time"]])
-    rows += timed
-    low += [-np.inf] * len(timed)
-    high += [np.inf] * len(timed)
-    objective = sum(weights[OBJECTIVES.index(name)] * integrals[name] for name in objectives)
-    problem = {"x": x, "p": p, "f": objective + SMOOTHING * smoothing, "g": ca.vertcat(*rows)}
-    measured = ca.Function(
-        "integrals", [x, p], [ca.vertcat(*integrals.values()), ca.vertcat(*segment_times)]
-    )
-    return PathNlp(
-        problem, np.array(low), np.array(high), segments, intervals, measured, len(timed)
-    )
+        for name, values in rates.items():
+            values.append(at.pop(name))
+        rows.append(at["joint jerk"] if fraction == 1.0 else ca.vertcat(*at.values()))
+    integrals = [sum(per_time)]
+    for values in rates.values():  # the rate's parabola at the Gauss points
+        at_points = INTERPOLATION @ ca.vertcat(*values)
+        integrals.append(sum(at_points[g] * per_time[g] for g in range(len(per_time))))
+    term = SMOOTHING * h * control[1] ** 2
+    for name in objectives:
+        term += weights[OBJECTIVES.index(name)] * integrals[OBJECTIVES.index(name)]
+    return [z, h, terms, limits, weights], ca.vertcat(*rows), ca.vertcat(*integrals), term
 
 
-def _continuity(before: tuple, after: tuple) -> list[ca.SX]:
-    """Rows that make q̇ and q̈ continuous at a landmark passed (d = 0 there): the arc
+@cache
+def interval_functions(objectives: tuple[str, ...]) -> list[ca.Function]:
+    """One interval's value (rows, integrals, term), Jacobian (rows, term, the rows'
+    Jacobian and the term's and the time's gradients in z) and Hessian (the upper triangle
+    of ∇²_z(σ term + λᵀrows + λ_t time)), in SX, for the weighted ``objectives``."""
+    inputs, rows, integrals, term = _interval(objectives)
+    z, names = inputs[0], ["z", "h", "terms", "limits", "weights"]
+    sigma, lam, lam_time = ca.SX.sym("sigma"), ca.SX.sym("lam", rows.numel()), ca.SX.sym("lam_t")
+    lagrangian = sigma * term + ca.dot(lam, rows) + lam_time * integrals[0]
+    value, jacobian, hessian = INTERVAL_FUNCTIONS
+    return [
+        ca.Function(value, inputs, [rows, integrals, term], names, ["rows", "integrals", "term"]),
+        ca.Function(
+            jacobian,
+            inputs,
+            [
+                rows,
+                term,
+                ca.jacobian(rows, z),
+                ca.gradient(term, z),
+                ca.gradient(integrals[0], z),
+            ],
+            names,
+            ["rows", "term", "jac_rows", "grad_term", "grad_time"],
+        ),
+        ca.Function(
+            hessian,
+            [*inputs, sigma, lam, lam_time],
+            [ca.triu(ca.hessian(lagrangian, z)[0])],
+            [*names, "sigma", "lam", "lam_t"],
+            ["hess"],
+        ),
+    ]
+
+
+@cache
+def landmark_functions() -> list[ca.Function]:
+    """The continuity rows at a landmark passed (:func:`_continuity`): value, Jacobian and
+    Lagrangian Hessian (upper triangle) in w = (the state before, the state after)."""
+    w = ca.SX.sym("w", 2 * STATE)
+    before, after = ca.SX.sym("before", PER_END), ca.SX.sym("after", PER_END)
+    limits = ca.SX.sym("limits", LIMIT_PARAMETERS)
+    rows = _continuity(w[:STATE], w[STATE:], before, after, limits)
+    lam = ca.SX.sym("lam", LANDMARK_ROWS)
+    inputs, names = [w, before, after, limits], ["w", "before", "after", "limits"]
+    value, jacobian, hessian = LANDMARK_FUNCTIONS
+    return [
+        ca.Function(value, inputs, [rows], names, ["rows"]),
+        ca.Function(jacobian, inputs, [rows, ca.jacobian(rows, w)], names, ["rows", "jac_rows"]),
+        ca.Function(
+            hessian,
+            [*inputs, lam],
+            [ca.triu(ca.hessian(ca.dot(lam, rows), w)[0])],
+            [*names, "lam"],
+            ["hess"],
+        ),
+    ]
+
+
+def _continuity(
+    end: ca.SX, start: ca.SX, end_terms: ca.SX, start_terms: ca.SX, limits: ca.SX
+) -> ca.SX:
+    """Rows that make q̇ and q̈ continuous at a landmark passed (d = 0 there), from the
+    state at the end of the segment before and at the start of the one after: the arc
     length's rate, q_s (2) and q̈ (2, over the acceleration limit)."""
-    end, end_terms, limits = before[1], before[2], before[3]
-    start, start_terms = after[0], after[2]
 
     def side(state: ca.SX, terms: ca.SX, which: int) -> tuple[ca.SX, ca.SX, ca.SX]:
         factor = terms[which]
@@ -263,4 +249,4 @@ def _continuity(before: tuple, after: tuple) -> list[ca.SX]:
 
     rate_end, qs_end, qdd_end = side(end, end_terms, 1)
     rate_start, qs_start, qdd_start = side(start, start_terms, 0)
-    return [rate_end - rate_start, qs_end - qs_start, (qdd_end - qdd_start) / limits[2]]
+    return ca.vertcat(rate_end - rate_start, qs_end - qs_start, (qdd_end - qdd_start) / limits[2])

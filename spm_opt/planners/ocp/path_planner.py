@@ -3,9 +3,10 @@ the motion, judge it, and solve again with tighter bounds until the evaluator fi
 
 The NLP (:mod:`~spm_opt.planners.ocp.path_nlp`) has no free durations: its only
 nonlinearities are √β in the jerk, torque and time terms and the offset's products with β,
-so IPOPT converges in 20-35 iterations from a start at :data:`START_SPEED` of the speed
-limits with d = 0 (the time-domain transcription: ~55 for minimum time, from toppra's
-motion, and 103-111 for the other objectives). The plan is
+so FATROP or IPOPT (:mod:`~spm_opt.planners.ocp.path_solver`) converges in 24-35
+iterations from a start at :data:`START_SPEED` of the speed limits with d = 0 (the
+time-domain transcription: ~55 for minimum time, from toppra's motion, and 103-111 for the
+other objectives). The plan is
 the motion x describes, sampled :data:`SAMPLES_PER_INTERVAL` times an interval (q = q₀ + d v;
 q̇ and q̈ from the formulas; times by 8-point Gauss–Legendre quadrature of du / √β), as
 quintic Hermite pieces through the samples.
@@ -20,10 +21,8 @@ from __future__ import annotations
 import dataclasses
 import time
 import weakref
-from functools import cache
 from typing import Any
 
-import casadi as ca
 import numpy as np
 
 from spm_opt import interrupt
@@ -33,7 +32,13 @@ from spm_opt.limits import PlannerBounds, planner_bounds
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp import ipopt
 from spm_opt.planners.ocp.constraints import UNLIMITED
-from spm_opt.planners.ocp.path_geometry import SegmentPath, path_map, segment_paths
+from spm_opt.planners.ocp.path_assembly import PathLayout
+from spm_opt.planners.ocp.path_geometry import (
+    SegmentPath,
+    path_map,
+    path_terms,
+    segment_paths,
+)
 from spm_opt.planners.ocp.path_nlp import (
     CONTROL,
     ENDS,
@@ -42,10 +47,9 @@ from spm_opt.planners.ocp.path_nlp import (
     PLACES,
     STATE,
     TERMS,
-    PathNlp,
     advance,
-    build,
 )
+from spm_opt.planners.ocp.path_solver import path_nlp, solver
 from spm_opt.planners.ocp.refinement import REFINEMENTS, tightened
 from spm_opt.planners.ocp.settings import OcpSettings
 from spm_opt.problem import Problem
@@ -72,15 +76,9 @@ energy's 1e-4: weighed here, it traded ∫τᵀτ for smoothness, so that on the
 minimum-energy plan took 0.03 % more effort than the minimum-time one)."""
 SAMPLES_PER_INTERVAL = 4
 """Samples of the plan per interval of the grid."""
-
-
-@cache
-def solver(segments: int, intervals: int, settings: OcpSettings, warm: bool) -> ca.Function:
-    """IPOPT on :func:`~spm_opt.planners.ocp.path_nlp.build`'s NLP; ``warm``: continuing
-    from a solution and its multipliers."""
-    options = ipopt.options(settings, warm, acceptable_iterations=0)
-    nlp = build(segments, intervals, objectives(settings), settings.timing).problem
-    return ca.nlpsol("path", "ipopt", nlp, {"ipopt": options, "print_time": False})
+FATROP_CONVERGED = "Success"
+"""The status a FATROP solve that converged leaves in the plan's statistics (IPOPT's is
+its own, :data:`~spm_opt.planners.ocp.ipopt.CONVERGED`)."""
 
 
 def objectives(settings: OcpSettings) -> tuple[str, ...]:
@@ -127,71 +125,86 @@ def _limits(problem: Problem, bounds: PlannerBounds) -> np.ndarray:
 def _path_parameters(problem: Problem, paths: list[SegmentPath]) -> np.ndarray:
     """The NLP's p but its limits: per segment the terms at every place, the interval
     lengths and the ends' terms."""
+    lengths = [np.diff(path.nodes) for path in paths]
+    places = np.array([*PLACES, 1.0])
+    us = [
+        (path.nodes[:-1, None] + length[:, None] * places).ravel()
+        for path, length in zip(paths, lengths, strict=True)
+    ]
     blocks = []
-    for path in paths:
-        lengths = np.diff(path.nodes)
-        u = (path.nodes[:-1, None] + lengths[:, None] * np.array([*PLACES, 1.0])).ravel()
-        terms = path.terms(problem, u)
+    for path, length, u, terms in zip(
+        paths, lengths, us, path_terms(problem, paths, us), strict=True
+    ):
         blocks.append(np.column_stack([terms[name].reshape(len(u), -1) for name in TERMS]).ravel())
-        blocks.append(lengths)
-        ends = path.terms(problem, path.nodes[[0, -1]])
+        blocks.append(length)
+        ends = path.geometry(path.nodes[[0, -1]])
         blocks.append(path.ends_speed_factor)
         blocks += [ends[name].ravel() for name in ENDS]
     return np.concatenate(blocks)
 
 
-def _start(paths: list[SegmentPath], limits: np.ndarray) -> np.ndarray:
+def _start(paths: list[SegmentPath], limits: np.ndarray, layout: PathLayout) -> np.ndarray:
     """x at :data:`START_SPEED` of the speed limits along the contour (d = 0)."""
-    blocks = []
+    states = []
     for path in paths:
         factor = np.maximum(path_map(path.nodes / path.length, path.zones)[1], 0.3)
         pace = np.max(np.abs(path.joints(path.nodes, 1)))  # rad/mm
         speed = START_SPEED * min(limits[0], limits[1] / pace)  # mm/s
-        states = np.zeros((len(path.nodes), STATE))
-        states[:, 0] = (speed / factor) ** 2
-        blocks += [states.ravel(), np.zeros(CONTROL * (len(path.nodes) - 1))]
-    return np.concatenate(blocks)
+        states.append(np.zeros((len(path.nodes), STATE)))
+        states[-1][:, 0] = (speed / factor) ** 2
+    return layout.join(states, [np.zeros((len(path.nodes) - 1, CONTROL)) for path in paths])
 
 
 def _retimed(
-    problem: Problem, nlp: PathNlp, x: np.ndarray, parameters: np.ndarray, timing: str
+    problem: Problem,
+    layout: PathLayout,
+    integrals: Any,
+    x: np.ndarray,
+    parameters: np.ndarray,
+    timing: str,
 ) -> np.ndarray:
     """x at the problem's durations where the timing keeps them: each segment's
     (``"segments"``), their total (``"total"``, and ``"bounded"`` when x is slower); β and
-    its derivatives scaled by the square of each segment's speed-up."""
+    its derivatives scaled by the square of each segment's speed-up (``integrals``: the
+    NLP's, for each segment's time)."""
     if timing == "free":
         return x
-    times = nlp.integrals(x, parameters)[1].full().ravel()
+    times = integrals(x, parameters)[1].full().ravel()
     given = problem.segment_durations
     speedup = times / given if timing == "segments" else np.sum(times) / np.sum(given)
     if timing == "bounded":
         speedup = max(speedup, 1.0)
-    scaled = x.copy()
+    parts: list[list[np.ndarray]] = [[], []]
     for segment, faster in enumerate(np.broadcast_to(speedup, len(given))):
-        states, controls = nlp.split(scaled, segment)  # views into scaled
+        states, controls = layout.split(x, segment)
         states[:, :2] *= faster**2
         controls[:, 0] *= faster**2
-    return scaled
+        parts[0].append(states)
+        parts[1].append(controls)
+    return layout.join(*parts)
 
 
-def _box(nlp: PathNlp, tube_mm: float) -> dict[str, np.ndarray]:
+def _box(layout: PathLayout, tube_mm: float) -> dict[str, np.ndarray]:
     """Variable bounds: β > 0, the offset within the tube and 0 at every landmark, at rest
     at the first and the last."""
     low, high = [], []
-    for segment in range(nlp.segments):
-        states_low = np.full((nlp.intervals + 1, STATE), -np.inf)
-        states_high = np.full((nlp.intervals + 1, STATE), np.inf)
+    for segment in range(layout.segments):
+        states_low = np.full((layout.intervals + 1, STATE), -np.inf)
+        states_high = np.full((layout.intervals + 1, STATE), np.inf)
         states_low[:, 0] = MIN_BETA
         states_low[:, 2], states_high[:, 2] = -tube_mm, tube_mm
         states_low[[0, -1], 2] = states_high[[0, -1], 2] = 0.0
         if segment == 0:
             states_low[0, 3:5] = states_high[0, 3:5] = 0.0
-        if segment == nlp.segments - 1:
+        if segment == layout.segments - 1:
             states_low[-1, 3:5] = states_high[-1, 3:5] = 0.0
-        controls = np.full(CONTROL * nlp.intervals, np.inf)
-        low += [states_low.ravel(), -controls]
-        high += [states_high.ravel(), controls]
-    return {"lbx": np.concatenate(low), "ubx": np.concatenate(high)}
+        low.append(states_low)
+        high.append(states_high)
+    controls = [np.full((layout.intervals, CONTROL), np.inf)] * layout.segments
+    return {
+        "lbx": layout.join(low, [-c for c in controls]),
+        "ubx": layout.join(high, controls),
+    }
 
 
 Continuation = tuple[tuple[int, int, tuple[str, ...], str], dict[str, np.ndarray]]
@@ -221,48 +234,42 @@ def plan_in_path_coordinates(
     )
     intervals = len(paths[0].nodes) - 1
     weighed = objectives(settings)
-    nlp = build(len(paths), intervals, weighed, settings.timing)
+    layout, nlp = path_nlp(len(paths), intervals, weighed, settings.timing)
     shape = (len(paths), intervals, weighed, settings.timing)
     solved = SOLVED.get(warm_start) if warm_start is not None else None
     continued = solved is not None and solved[0] == shape
     along = _path_parameters(problem, paths)  # the limits change between rounds, not these
     unweighted = np.concatenate([along, limits, np.ones(len(OBJECTIVES))])
-    start = _retimed(problem, nlp, _start(paths, limits), unweighted, settings.timing)
+    start = _start(paths, limits, layout)
+    start = _retimed(problem, layout, nlp.integrals, start, unweighted, settings.timing)
     weights = _weights(settings, weighed, nlp.integrals(start, unweighted)[0].full().ravel())
     guess = solved[1] if continued else {"x0": start}
     statistics: dict[str, Any] = {"iterations": 0, "solve_time_s": 0.0, "function_time_s": 0.0}
     statistics["construction_time_s"] = time.perf_counter() - started
-    low, high = nlp.row_bounds(problem.segment_durations, settings.timing)
+    low, high = layout.row_bounds(problem.segment_durations, settings.timing)
     for round_ in range(REFINEMENTS + 1):
-        solving_with = solver(len(paths), intervals, settings, warm=continued or round_ > 0)
-        parameters = np.concatenate([along, limits, weights])
-        solving = time.perf_counter()
-        solution = interrupt.solve(
-            solving_with, **guess, p=parameters, **_box(nlp, limits[5]), lbg=low, ubg=high
+        arguments = {
+            **guess,
+            "p": np.concatenate([along, limits, weights]),
+            **_box(layout, limits[5]),
+            "lbg": low,
+            "ubg": high,
+        }
+        solution = _solve(
+            layout, settings, weighed, continued or round_ > 0, arguments, name, statistics
         )
-        stats = solving_with.stats()
-        statistics["iterations"] += int(stats["iter_count"])
-        statistics["solve_time_s"] += time.perf_counter() - solving
-        statistics["function_time_s"] += sum(
-            v for k, v in stats.items() if k.startswith("t_wall_nlp")
-        )
-        if stats["return_status"] != ipopt.CONVERGED:
-            raise PlanningError(
-                f"{name}: IPOPT stopped with {stats['return_status']} after "
-                f"{stats['iter_count']} iterations in path coordinates"
-            )
         rows = solution["g"].full().ravel()
         statistics.update(
             refinements=round_,
-            status=stats["return_status"],
             constraint_violation=float(max(np.max(low - rows), np.max(rows - high), 0.0)),
             transcription="path",
-            variables=int(nlp.problem["x"].numel()),
+            variables=layout.size,
             rows=int(rows.size),
             settings=dataclasses.asdict(settings),
         )
         statistics["start"] = "solution" if continued else "speed limits"
-        trajectory = _trajectory(problem, paths, nlp, solution["x"].full().ravel(), statistics)
+        x = solution["x"].full().ravel()
+        trajectory = _trajectory(problem, paths, layout, x, statistics)
         broken = evaluate(problem, trajectory).violations
         if not broken:
             SOLVED[trajectory] = (shape, ipopt.continuation(solution))
@@ -276,10 +283,50 @@ def plan_in_path_coordinates(
     )
 
 
+def _solve(
+    layout: PathLayout,
+    settings: OcpSettings,
+    weighed: tuple[str, ...],
+    warm: bool,
+    arguments: dict[str, Any],
+    name: str,
+    statistics: dict[str, Any],
+) -> dict[str, Any]:
+    """The NLP solved by FATROP or IPOPT as ``settings`` choose ("auto" continues a
+    ``warm`` solve, from a solution and its multipliers, with IPOPT: FATROP takes no
+    multipliers), and by IPOPT from the same start when FATROP stops without converging;
+    its iterations, times, solver and status added to ``statistics``; a
+    :class:`PlanningError` when no solver converges."""
+    fatrop = settings.fatrop and not (warm and settings.solver == "auto")
+    tried = []
+    for chosen in ("fatrop", "ipopt") if fatrop else ("ipopt",):
+        with_chosen = dataclasses.replace(settings, solver=chosen)
+        solving_with = solver(layout.segments, layout.intervals, with_chosen, weighed, warm)
+        solving = time.perf_counter()
+        solution = interrupt.solve(solving_with, **arguments)
+        stats = solving_with.stats()
+        statistics["iterations"] += int(stats["iter_count"])
+        statistics["solve_time_s"] += time.perf_counter() - solving
+        statistics["function_time_s"] += sum(
+            v for k, v in stats.items() if k.startswith("t_wall_nlp")
+        )
+        if chosen == "fatrop":
+            converged = bool(stats["success"])
+            status = FATROP_CONVERGED if converged else f"return code {stats['return_status']}"
+        else:
+            status = stats["return_status"]
+            converged = status == ipopt.CONVERGED
+        statistics.update(solver=chosen, status=status)
+        tried.append(f"{chosen} stopped with {status} after {stats['iter_count']} iterations")
+        if converged:
+            return solution
+    raise PlanningError(f"{name}: {'; '.join(tried)} in path coordinates")
+
+
 def _trajectory(
     problem: Problem,
     paths: list[SegmentPath],
-    nlp: PathNlp,
+    layout: PathLayout,
     x: np.ndarray,
     statistics: dict[str, Any],
 ) -> Trajectory:
@@ -287,8 +334,8 @@ def _trajectory(
     parts: list[list[np.ndarray]] = [[], [], [], []]
     visits, at = [0.0], 0.0
     for segment, path in enumerate(paths):
-        states, controls = nlp.split(x, segment)
-        t, q, qd, qdd = _segment_samples(problem, path, states, controls)
+        states, controls = layout.split(x, segment)
+        t, q, qd, qdd = _segment_samples(path, states, controls)
         first = slice(None) if segment == 0 else slice(1, None)
         for part, values in zip(parts, (at + t, q, qd, qdd), strict=True):
             part.append(values[first])
@@ -304,7 +351,7 @@ def _trajectory(
 
 
 def _segment_samples(
-    problem: Problem, path: SegmentPath, states: np.ndarray, controls: np.ndarray
+    path: SegmentPath, states: np.ndarray, controls: np.ndarray
 ) -> tuple[np.ndarray, ...]:
     """Times from the segment's start (s), q, q̇, q̈ (rad, rad/s, rad/s²) at its samples."""
     intervals = len(path.nodes) - 1
@@ -323,7 +370,7 @@ def _segment_samples(
     t = np.concatenate(
         [[0.0], np.cumsum(np.sum(half[:, None] * weights / np.sqrt(beta_at), axis=1))]
     )
-    terms = path.terms(problem, u)
+    terms = path.geometry(u)
     qu = terms["A1"] + d1[:, None] * terms["v"] + d[:, None] * terms["v1"]
     quu = (
         terms["A2"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+from spm_opt.errors import InputError
 from spm_opt.planners.ocp.transcription import Grid
 from spm_opt.planners.registry import planner_options, settings_from_options
 from spm_opt.problem import Problem
@@ -36,7 +37,7 @@ class OcpSettings:
         segments free) or "segments" (each segment's duration as the problem gives it).
     max_iterations : int
     tolerance : float
-        IPOPT's convergence tolerance.
+        The solver's convergence tolerance (IPOPT's or FATROP's).
     acceptable_iterations : int
         IPOPT's ``acceptable_iter``: after this many iterations in a row at its looser
         "acceptable" level it stops early; such a stop is never a plan, but the start of a
@@ -45,7 +46,7 @@ class OcpSettings:
         Weights of the total time (s), ∫τᵀτ dt and ∫jerk² dt, each divided by its value at
         the initial guess so that the weights compare like with like.
     print_level : int
-        IPOPT's verbosity (0 silent, 5 every iteration).
+        The solver's verbosity (0 silent; IPOPT's 5: every iteration).
     transcription : str
         "path" (the contour's arc length as the independent variable and a lateral offset
         within the tube), "time" (phases of free durations: the cut free in joint space), or
@@ -54,6 +55,12 @@ class OcpSettings:
         "path", ``corner_nodes`` counts the intervals of the zone at each end of a segment
         and ``path_intervals`` those between; ``checks_per_interval`` and
         ``acceptable_iterations`` do not apply.
+    solver : str
+        In path coordinates: "fatrop" (FATROP, which exploits the stage-wise structure; it
+        needs timing "free", since a fixed timing's time row spans every stage), "ipopt", or
+        "auto": FATROP where the timing is free and the solve starts afresh, else IPOPT
+        (which continues from a solution's multipliers; FATROP takes none). The time domain
+        always uses IPOPT.
     """
 
     nodes_per_phase: int = 10
@@ -70,6 +77,7 @@ class OcpSettings:
     jerk_weight: float = 0.0
     print_level: int = 0
     transcription: str = "auto"
+    solver: str = "auto"
 
     _RANGES = {
         "nodes_per_phase": (1, 200),
@@ -91,8 +99,19 @@ class OcpSettings:
         """Settings from the problem's ``[planner.NAME]`` table over ``defaults``; one-line
         errors."""
         options = planner_options(problem, name, OPTION_KEYS)
-        choices = {"timing": TIMINGS, "transcription": TRANSCRIPTIONS}
-        return settings_from_options(name, defaults, options, cls._RANGES, choices)
+        choices = {"timing": TIMINGS, "transcription": TRANSCRIPTIONS, "solver": SOLVERS}
+        settings = settings_from_options(name, defaults, options, cls._RANGES, choices)
+        if settings.solver == "fatrop" and settings.timing != "free":
+            raise InputError(
+                f"planner.{name}.solver = 'fatrop': needs timing = 'free' (this planner's "
+                f"is {settings.timing!r}); use 'ipopt' or 'auto'"
+            )
+        return settings
+
+    @property
+    def fatrop(self) -> bool:
+        """Whether path coordinates solve with FATROP (else IPOPT)."""
+        return self.solver == "fatrop" or (self.solver == "auto" and self.timing == "free")
 
     @property
     def path_grid(self) -> tuple[int, int]:
@@ -110,6 +129,8 @@ TIMINGS = ("free", "bounded", "total", "segments")
 """The choices of :attr:`OcpSettings.timing`."""
 TRANSCRIPTIONS = ("auto", "path", "time")
 """The choices of :attr:`OcpSettings.transcription`."""
+SOLVERS = ("auto", "ipopt", "fatrop")
+"""The choices of :attr:`OcpSettings.solver`."""
 MIN_TIME_JERK_WEIGHT = 1e-6
 """The jerk's weight in minimum time: a tie-breaker between equally fast motions."""
 OPTION_KEYS = tuple(f.name for f in dataclasses.fields(OcpSettings))
