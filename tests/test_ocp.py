@@ -311,6 +311,9 @@ def random_flap(sweep: str, planner: str, flap: int) -> so.Problem:
         ("random_flaps_varied", "ocp-min-energy", 157),
         # in path coordinates, a trial point with β < 0 between two nodes: √β was NaN
         ("random_flaps_varied", "ocp-min-jerk", 103),
+        # in the stage-wise NLP, IPOPT's adaptive barrier took more than 300 iterations;
+        # its monotone one, tried next, 72
+        ("random_flaps_varied", "ocp-min-jerk", 49),
     ],
 )
 def test_flaps_that_once_failed_are_clean(sweep, planner, flap):

@@ -76,6 +76,9 @@ energy's 1e-4: weighed here, it traded ∫τᵀτ for smoothness, so that on the
 minimum-energy plan took 0.03 % more effort than the minimum-time one)."""
 SAMPLES_PER_INTERVAL = 4
 """Samples of the plan per interval of the grid."""
+MONOTONE_IPOPT = "ipopt, monotone barrier"
+"""The last solver a path-coordinate plan tries
+(:data:`~spm_opt.planners.ocp.path_solver.MONOTONE`)."""
 FATROP_CONVERGED = "Success"
 """The status a FATROP solve that converged leaves in the plan's statistics (IPOPT's is
 its own, :data:`~spm_opt.planners.ocp.ipopt.CONVERGED`)."""
@@ -294,14 +297,23 @@ def _solve(
 ) -> dict[str, Any]:
     """The NLP solved by FATROP or IPOPT as ``settings`` choose ("auto" continues a
     ``warm`` solve, from a solution and its multipliers, with IPOPT: FATROP takes no
-    multipliers), and by IPOPT from the same start when FATROP stops without converging;
-    its iterations, times, solver and status added to ``statistics``; a
-    :class:`PlanningError` when no solver converges."""
+    multipliers); when FATROP stops without converging, by IPOPT from the same start, and
+    when IPOPT's adaptive barrier does, by its monotone one. Its iterations, times, solver
+    and status added to ``statistics``; a :class:`PlanningError` when none converges."""
     fatrop = settings.fatrop and not (warm and settings.solver == "auto")
     tried = []
-    for chosen in ("fatrop", "ipopt") if fatrop else ("ipopt",):
-        with_chosen = dataclasses.replace(settings, solver=chosen)
-        solving_with = solver(layout.segments, layout.intervals, with_chosen, weighed, warm)
+    for chosen in (*(["fatrop"] if fatrop else []), "ipopt", MONOTONE_IPOPT):
+        with_chosen = dataclasses.replace(
+            settings, solver="fatrop" if chosen == "fatrop" else "ipopt"
+        )
+        solving_with = solver(
+            layout.segments,
+            layout.intervals,
+            with_chosen,
+            weighed,
+            warm,
+            monotone=chosen == MONOTONE_IPOPT,
+        )
         solving = time.perf_counter()
         solution = interrupt.solve(solving_with, **arguments)
         stats = solving_with.stats()
