@@ -128,6 +128,7 @@ def nlp_solver(
     options: dict[str, Any],
     background: bool = True,
     reversed_: tuple[int, ...] = (0,),
+    interpreted: Callable[[], ca.Function] | None = None,
 ) -> Solver:
     """``nlpsol(name, plugin, nlp, {**options, **derivatives})`` with ``nlp, derivatives =
     assemble(fs)``, where ``fs`` are ``functions()`` compiled.
@@ -136,7 +137,8 @@ def nlp_solver(
     calling it; with ``background`` a missing library is compiled in a thread while the
     solver returned runs the SX functions (:func:`wait_for_builds` waits for it), else
     before returning. The library also holds the reverse derivatives of the functions at
-    ``reversed_`` (those whose rows are the NLP's g).
+    ``reversed_`` (those whose rows are the NLP's g). ``interpreted``, when given, makes
+    the solver that runs until the library is there (else the SX functions assembled).
     """
     started = time.perf_counter()
 
@@ -144,10 +146,14 @@ def nlp_solver(
         nlp, derivatives = assemble(fs)
         return ca.nlpsol(name, plugin, nlp, {**options, **derivatives})
 
+    def uncompiled(symbolic: Callable[[], list[ca.Function]]) -> ca.Function:
+        return interpreted() if interpreted is not None else solver_of(symbolic())
+
     chosen = compiler()
     if chosen is None:
         _LOG.warning("no C compiler: the NLP %r runs in CasADi's interpreter", name)
-        return Solver(solver_of(functions()), INTERPRETED, time.perf_counter() - started, None)
+        solver = uncompiled(functions)
+        return Solver(solver, INTERPRETED, time.perf_counter() - started, None)
     library = library_path(chosen, key)
 
     def load() -> ca.Function:
@@ -165,7 +171,7 @@ def nlp_solver(
         pending.result()
         if library.exists():
             return Solver(load(), COMPILED, time.perf_counter() - started, library)
-    solver = solver_of(symbolic)
+    solver = uncompiled(lambda: symbolic)
     return Solver(solver, INTERPRETED, time.perf_counter() - started, library, load)
 
 

@@ -13,14 +13,13 @@ start from the solution's x alone.
 from __future__ import annotations
 
 import hashlib
-import time
 from functools import cache
 from pathlib import Path
 
 import casadi as ca
 
 from spm_opt.planners.ocp import ipopt
-from spm_opt.planners.ocp.nlp_library import INTERPRETED, Solver, nlp_solver
+from spm_opt.planners.ocp.nlp_library import Solver, nlp_solver
 from spm_opt.planners.ocp.path_assembly import AssembledPathNlp, PathLayout, assemble
 from spm_opt.planners.ocp.path_nlp import (
     INTERVAL_FUNCTIONS,
@@ -28,10 +27,19 @@ from spm_opt.planners.ocp.path_nlp import (
     interval_functions,
     landmark_functions,
 )
+from spm_opt.planners.ocp.path_oracle import NAMES, oracle_functions
 from spm_opt.planners.ocp.settings import OcpSettings
 
 FORMULATION_SOURCES = ("planners/ocp/path_nlp.py",)
-"""The package's files whose code makes the compiled functions: a change is a new library."""
+"""The package's files whose code makes the compiled interval and landmark functions: a
+change is a new library."""
+ORACLE_SOURCES = (
+    *FORMULATION_SOURCES,
+    "planners/ocp/path_assembly.py",
+    "planners/ocp/path_oracle.py",
+    "planners/ocp/assembly.py",
+)
+"""Those whose code makes the compiled NLP for FATROP (:mod:`path_oracle`)."""
 
 
 def time_rows(timing: str, segments: int) -> int:
@@ -70,7 +78,7 @@ def solver(
     monotone barrier (:data:`MONOTONE`)."""
     layout, nlp = path_nlp(segments, intervals, objectives, settings.timing)
     if settings.fatrop:
-        return _fatrop(layout, nlp, settings)
+        return _fatrop(layout, nlp, settings, objectives)
     chosen = ipopt.options(settings, warm, acceptable_iterations=0)
     options = {
         "ipopt": {**chosen, **(MONOTONE if monotone else {})},
@@ -95,33 +103,54 @@ def solver(
     )
 
 
-def _fatrop(layout: PathLayout, nlp: AssembledPathNlp, settings: OcpSettings) -> Solver:
-    """FATROP on the NLP expanded to SX, its derivatives CasADi's (the plugin takes none
-    given), run in CasADi's interpreter."""
-    started = time.perf_counter()
+def _fatrop(
+    layout: PathLayout, nlp: AssembledPathNlp, settings: OcpSettings, objectives: tuple[str, ...]
+) -> Solver:
+    """FATROP on a call of the NLP compiled with its derivatives (:mod:`path_oracle`, one
+    library per grid, cached on disk); until that library is there, on the NLP expanded to
+    SX, with CasADi's derivatives, in CasADi's interpreter."""
     low, high = layout.row_bounds()
     options = {
         "structure_detection": "auto",
         "equality": (low == high).tolist(),
-        "expand": True,
         "print_time": False,
+        "calc_lam_p": False,
         "fatrop": {
             "tol": settings.tolerance,
             "max_iter": settings.max_iterations,
             "print_level": settings.print_level,
         },
     }
-    function = ca.nlpsol("path", "fatrop", nlp.problem, options)
-    return Solver(function, INTERPRETED, time.perf_counter() - started, None)
+
+    def parts(functions: list[ca.Function]) -> tuple[dict, dict]:
+        x, p = (ca.MX.sym(name, nlp.problem[name].numel()) for name in "xp")
+        f, g = functions[0](x, p)
+        return {"x": x, "p": p, "f": f, "g": g}, {}
+
+    shape = (layout.segments, layout.intervals, settings.timing)
+    return nlp_solver(
+        "path",
+        "fatrop",
+        formulation_key(objectives, ORACLE_SOURCES, shape),
+        NAMES,
+        lambda: oracle_functions(nlp),
+        parts,
+        options,
+        reversed_=(),
+        interpreted=lambda: ca.nlpsol("path", "fatrop", nlp.problem, {**options, "expand": True}),
+    )
 
 
 @cache
-def formulation_key(objectives: tuple[str, ...]) -> str:
+def formulation_key(
+    objectives: tuple[str, ...], sources: tuple[str, ...] = FORMULATION_SOURCES, shape: tuple = ()
+) -> str:
     """What identifies the compiled functions without building them: the code that builds
-    them and the objectives they weigh."""
+    them (the package's ``sources``), the objectives they weigh and the grid's ``shape``
+    (for functions of the whole NLP)."""
     package = Path(__file__).resolve().parents[2]
     digest = hashlib.sha256()
-    for name in FORMULATION_SOURCES:
+    for name in sources:
         digest.update((package / name).read_bytes())
-    digest.update(repr(objectives).encode())
+    digest.update(repr((objectives, shape)).encode())
     return digest.hexdigest()
