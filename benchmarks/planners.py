@@ -18,7 +18,7 @@ batch torque. Then, per planner, a freshly loaded problem and:
   ``construction_time_s`` of the first plan after clearing the ocp package's caches
   (``nlp.interval``, ``nlp.symbolic_functions``, ``nlp.formulation_key``,
   ``nlp.build_nlp``, ``ipopt.solver``, ``refinement.probe``, and in path coordinates
-  ``path_nlp.interval_functions``, ``path_nlp.landmark_functions``, ``path_solver.path_nlp``,
+  ``path_nlp.interval_functions``, ``path_nlp.landmark_functions``, ``path_solver.assembled_nlp``,
   ``path_solver.solver``, ``path_solver.formulation_key``): building the interval's
   functions, the NLP assembled from them and the solver (IPOPT or FATROP), and generating
   the C of the interval's functions (the compiler then runs in the background unless the
@@ -122,7 +122,7 @@ def clear_ocp_caches() -> None:
         refinement.probe,
         path_nlp.interval_functions,
         path_nlp.landmark_functions,
-        path_solver.path_nlp,
+        path_solver.assembled_nlp,
         path_solver.solver,
         path_solver.formulation_key,
     ):

@@ -44,10 +44,10 @@ def test_min_time_meets_every_limit_on_the_contour(paper_problem, min_time):
 
 def test_min_time_is_near_the_lower_bound(paper_problem, min_time):
     """The limits allow no faster cut along the contour than the bound (cutting corners
-    inside the 0.1 mm tube saves far less than the plan's 0.5 % reserve on each limit):
-    within 2 % of it."""
+    inside the 0.1 mm tube saves far less than the plan's 0.2 % reserve on each limit):
+    within 1 % of it (1.009)."""
     ratio = so.evaluate(paper_problem, min_time).duration_over_lower_bound
-    assert 1.0 < ratio < 1.02
+    assert 1.0 < ratio <= 1.01
 
 
 def test_plan_records_solver_statistics(min_time):
@@ -82,9 +82,10 @@ def test_a_similar_problem_continues_from_a_plans_solution(paper_problem, min_ti
     assert continued.duration < 0.95 * min_time.duration
 
 
-TIME_DOMAIN = {"transcription": "time", "nodes_per_phase": 10}
-"""``ocp-min-time`` in the time domain (its grid there), where IPOPT may stop at its
-acceptable level."""
+TIME_DOMAIN = {"transcription": "time", "nodes_per_phase": 10, "margin": 0.005}
+"""``ocp-min-time`` in the time domain (its grid and margin there: with path coordinates'
+0.2 % the plain solve and the continued one found different optima, 38.30 and 37.81 s),
+where IPOPT may stop at its acceptable level."""
 
 
 def test_an_acceptable_level_stop_is_solved_again_strictly(paper_problem):

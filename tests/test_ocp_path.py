@@ -17,7 +17,7 @@ from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp import path_planner
 from spm_opt.planners.ocp.path_geometry import path_map, segment_paths
-from spm_opt.planners.ocp.path_solver import path_nlp
+from spm_opt.planners.ocp.path_solver import assembled_nlp
 from spm_opt.planners.registry import get_planner
 
 ZONE = st.one_of(st.just(0.0), st.floats(0.01, 0.45))
@@ -177,7 +177,7 @@ def _random_point(problem, planner, seed):
     paths = segment_paths(
         problem, tuple(limits[:4]), path_planner.PATH_SAMPLES, settings.path_grid, (2.0, 0.5)
     )
-    layout, nlp = path_nlp(
+    layout, nlp = assembled_nlp(
         len(paths), len(paths[0].nodes) - 1, path_planner.objectives(settings), settings.timing
     )
     rng = np.random.default_rng(seed)

@@ -85,12 +85,11 @@ def path_map(xi: np.ndarray, zones: tuple[float, float]) -> tuple[np.ndarray, ..
 
 @dataclass(frozen=True)
 class SegmentPath:
-    """One segment's joint path q₀(s), its lateral vector v(s) (rad/mm), its length
-    (mm), its map's end zones and its grid's nodes (u, mm)."""
+    """One segment's joint path q₀(s) and its lateral vector v(s) (rad/mm) as one spline
+    of four columns, its length (mm), its map's end zones and its grid's nodes (u, mm)."""
 
     length: float
-    joints: CubicSpline
-    lateral: CubicSpline
+    curves: CubicSpline
     zones: tuple[float, float]
     nodes: np.ndarray
 
@@ -112,7 +111,18 @@ class SegmentPath:
             return d0, d1 * g1, d2 * g1**2 + d1 * g2, d3 * g1**3 + 3 * d2 * g1 * g2 + d1 * g3
 
         names = ("q", "A1", "A2", "A3", "v", "v1", "v2", "v3")
-        return dict(zip(names, (*along(self.joints), *along(self.lateral)), strict=True))
+        values = along(self.curves)
+        return dict(
+            zip(names, [v[:, :2] for v in values] + [v[:, 2:] for v in values], strict=True)
+        )
+
+    def joints(self, s: np.ndarray, order: int = 0) -> np.ndarray:
+        """q₀ or its ``order``-th derivative at arc lengths s (N,), mm: (N, 2)."""
+        return self.curves(s, order)[:, :2]
+
+    def lateral(self, s: np.ndarray, order: int = 0) -> np.ndarray:
+        """v or its ``order``-th derivative at arc lengths s (N,), mm: (N, 2), rad/mm."""
+        return self.curves(s, order)[:, 2:]
 
 
 def path_terms(
@@ -153,11 +163,12 @@ def _speed_metric(problem: Problem, q: np.ndarray) -> np.ndarray:
     return np.column_stack([metric[:, 0, 0], metric[:, 0, 1], metric[:, 1, 1]]) / MM**2
 
 
-def _ramp_length(joints: CubicSpline, length: float, bounds_speed: tuple[float, ...]) -> float:
+def _ramp_length(curves: CubicSpline, length: float, bounds_speed: tuple[float, ...]) -> float:
     """Arc length, mm, of a start from rest to cruise: v (v / a + a / j) with the path's
-    steepest joint (tool speed mm/s, joint speed rad/s, acceleration, jerk)."""
+    steepest joint (tool speed mm/s, joint speed rad/s, acceleration, jerk); ``curves``:
+    the joint path in its first two columns."""
     tool, joint_speed, acceleration, jerk = bounds_speed
-    pace = float(np.max(np.abs(joints(np.linspace(0.0, length, 50), 1))))  # rad/mm
+    pace = float(np.max(np.abs(curves(np.linspace(0.0, length, 50), 1)[:, :2])))  # rad/mm
     speed = min(tool, joint_speed / pace)
     return speed * (speed * pace / acceleration + acceleration / jerk)
 
@@ -181,8 +192,9 @@ def segment_paths(
         s = np.linspace(0.0, length, samples)
         q = problem.contour_angles(ends[k] + s * MM)
         q[0], q[-1] = angles[k], angles[k + 1]
-        joints = CubicSpline(s, q)
-        ramp = _ramp_length(joints, length, limits) / length
+        lateral = _lateral_vectors(problem, q, contour.normal[k])
+        curves = CubicSpline(s, np.column_stack([q, lateral]))
+        ramp = _ramp_length(curves, length, limits) / length
         rest = (k == 0, k == count - 1)
         grid_zone = [
             float(np.clip(zones[0 if at_rest else 1] * ramp, MIN_ZONE, 0.3)) for at_rest in rest
@@ -205,8 +217,7 @@ def segment_paths(
                 1.0 - node_zone[1] * spread[1][::-1][1:],
             ]
         )
-        lateral = CubicSpline(s, _lateral_vectors(problem, q, contour.normal[k]))
-        paths.append(SegmentPath(length, joints, lateral, map_zone, xi * length))
+        paths.append(SegmentPath(length, curves, map_zone, xi * length))
     return paths
 
 

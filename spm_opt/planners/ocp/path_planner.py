@@ -23,6 +23,7 @@ import time
 import weakref
 from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from spm_opt import interrupt
@@ -49,7 +50,7 @@ from spm_opt.planners.ocp.path_nlp import (
     TERMS,
     advance,
 )
-from spm_opt.planners.ocp.path_solver import path_nlp, solver
+from spm_opt.planners.ocp.path_solver import assembled_nlp, solver
 from spm_opt.planners.ocp.refinement import REFINEMENTS, tightened
 from spm_opt.planners.ocp.settings import OcpSettings
 from spm_opt.problem import Problem
@@ -161,7 +162,7 @@ def _start(paths: list[SegmentPath], limits: np.ndarray, layout: PathLayout) -> 
 def _retimed(
     problem: Problem,
     layout: PathLayout,
-    integrals: Any,
+    integrals: ca.Function,
     x: np.ndarray,
     parameters: np.ndarray,
     timing: str,
@@ -237,7 +238,7 @@ def plan_in_path_coordinates(
     )
     intervals = len(paths[0].nodes) - 1
     weighed = objectives(settings)
-    layout, nlp = path_nlp(len(paths), intervals, weighed, settings.timing)
+    layout, nlp = assembled_nlp(len(paths), intervals, weighed, settings.timing)
     shape = (len(paths), intervals, weighed, settings.timing)
     solved = SOLVED.get(warm_start) if warm_start is not None else None
     continued = solved is not None and solved[0] == shape

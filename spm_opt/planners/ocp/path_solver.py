@@ -49,7 +49,7 @@ def time_rows(timing: str, segments: int) -> int:
 
 
 @cache
-def path_nlp(
+def assembled_nlp(
     segments: int, intervals: int, objectives: tuple[str, ...], timing: str
 ) -> tuple[PathLayout, AssembledPathNlp]:
     """The layout and the NLP (its functions in SX) for ``segments`` segments of
@@ -76,7 +76,7 @@ def solver(
     """FATROP or IPOPT (``settings.fatrop``) on :func:`path_nlp`'s NLP; ``warm`` (IPOPT
     only): continuing from a solution and its multipliers; ``monotone``: IPOPT with the
     monotone barrier (:data:`MONOTONE`)."""
-    layout, nlp = path_nlp(segments, intervals, objectives, settings.timing)
+    layout, nlp = assembled_nlp(segments, intervals, objectives, settings.timing)
     if settings.fatrop:
         return _fatrop(layout, nlp, settings, objectives)
     chosen = ipopt.options(settings, warm, acceptable_iterations=0)
