@@ -12,9 +12,10 @@ the sweeps' mean tool speed (two thirds of the tool-speed limit; the bound of
 ``ocp-min-energy`` and the total of ``ocp-min-jerk``). Per flap and planner: one cold plan
 (not timed: it pays for the NLP's construction), then ``--repeats`` warm ``spm_opt.plan``
 followed by ``spm_opt.evaluate`` of the returned plan, as a user judges it; the table has
-their median wall time, the median IPOPT iterations (ocp-* planners) and the plan's
-duration. The last columns are each planner's median time per segment against the first
-flap's: growth no faster than linear in the segments keeps that ratio near or below 1.
+their median wall time, the median solver iterations (ocp-* planners: IPOPT's or FATROP's)
+and the plan's duration. The last columns are each planner's median time per segment
+against the first flap's: growth no faster than linear in the segments keeps that ratio
+near or below 1.
 """
 
 from __future__ import annotations
@@ -135,7 +136,7 @@ def _print_table(counts: list[int], planners: list[str], results: dict[str, Any]
             cells.append(f"{text:>30s}")
         print(f"{count:9d} " + " ".join(cells))
     print(
-        "(median wall time of plan + evaluate of warm plans, the plan's IPOPT iterations and"
+        "(median wall time of plan + evaluate of warm plans, the plan's solver iterations and"
         " duration, and ×: time per segment against the first row's)"
     )
 

@@ -143,22 +143,36 @@ def assemble(
     hess = hessian.map(m)(*arguments, lam_f, multipliers)
     hess_lag = _hessian(hessian, columns, scale, n)(hess.nz[:])
 
-    inputs, names = [x, p], ["x", "p"]
+    inputs = [x, p]
     return AssembledNlp(
         {"x": x, "p": p, "f": f, "g": g},
         ca.Function("terms", inputs, [total_time, effort, jerk_integral]),
-        {
-            "grad_f": ca.Function("nlp_grad_f", inputs, [f, grad_f], names, ["f", "grad_f_x"]),
-            "jac_g": ca.Function("nlp_jac_g", inputs, [g, jac_g], names, ["g", "jac_g_x"]),
-            "hess_lag": ca.Function(
-                "nlp_hess_l",
-                [x, p, lam_f, lam_g],
-                [hess_lag],
-                ["x", "p", "lam_f", "lam_g"],
-                ["hess_gamma_x_x"],
-            ),
-        },
+        derivative_functions(x, p, (f, grad_f), (g, jac_g), (lam_f, lam_g, hess_lag)),
     )
+
+
+def derivative_functions(
+    x: ca.MX,
+    p: ca.MX,
+    gradient: tuple[ca.MX, ca.MX],
+    jacobian: tuple[ca.MX, ca.MX],
+    hessian: tuple[ca.MX, ca.MX, ca.MX],
+) -> dict[str, ca.Function]:
+    """IPOPT's ``grad_f``, ``jac_g`` and ``hess_lag`` options: the functions of (x, p) that
+    give (f, ∇f), (g, ∂g/∂x) and, with the multipliers (σ, λ), the Lagrangian's Hessian."""
+    inputs, names = [x, p], ["x", "p"]
+    lam_f, lam_g, hess_lag = hessian
+    return {
+        "grad_f": ca.Function("nlp_grad_f", inputs, [*gradient], names, ["f", "grad_f_x"]),
+        "jac_g": ca.Function("nlp_jac_g", inputs, [*jacobian], names, ["g", "jac_g_x"]),
+        "hess_lag": ca.Function(
+            "nlp_hess_l",
+            [x, p, lam_f, lam_g],
+            [hess_lag],
+            ["x", "p", "lam_f", "lam_g"],
+            ["hess_gamma_x_x"],
+        ),
+    }
 
 
 def _interval_columns(grid: Grid, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from spm_opt.planners.ocp.assembly import Scatter, scatter
+from spm_opt.planners.ocp.assembly import Scatter, derivative_functions, scatter
 from spm_opt.planners.ocp.path_nlp import (
     CONTROL,
     INTERVAL_HIGH,
@@ -262,21 +262,11 @@ def assemble(
         ca.vertcat(hess.nz[:], hess_landmarks.nz[:])
     )
 
-    inputs, names = [x, p], ["x", "p"]
+    inputs = [x, p]
     return AssembledPathNlp(
         {"x": x, "p": p, "f": f, "g": g},
         ca.Function("integrals", inputs, [totals, segment_times]),
-        {
-            "grad_f": ca.Function("nlp_grad_f", inputs, [f, grad_f], names, ["f", "grad_f_x"]),
-            "jac_g": ca.Function("nlp_jac_g", inputs, [g, jac_g], names, ["g", "jac_g_x"]),
-            "hess_lag": ca.Function(
-                "nlp_hess_l",
-                [x, p, lam_f, lam_g],
-                [hess_lag],
-                ["x", "p", "lam_f", "lam_g"],
-                ["hess_gamma_x_x"],
-            ),
-        },
+        derivative_functions(x, p, (f, grad_f), (g, jac_g), (lam_f, lam_g, hess_lag)),
     )
 
 
