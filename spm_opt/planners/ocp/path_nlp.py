@@ -21,6 +21,9 @@ the jerk ∫ q⃛ᵀq⃛ dt = ∫ q⃛ᵀq⃛ / √β du (Gauss–Legendre on ev
 from their parabola through the interval's three places; the weights are parameters), plus
 1e-9 ∫ d'''² du, which keeps d smooth where the objective does not decide it. With fixed
 timing, rows hold the total time or each segment's.
+
+This module writes one interval's functions and one landmark's (value, Jacobian,
+Hessian); :mod:`~spm_opt.planners.ocp.path_assembly` lays them out into the NLP.
 """
 
 from __future__ import annotations

@@ -82,7 +82,7 @@ def solver(
     warm: bool,
     monotone: bool = False,
 ) -> Solver:
-    """FATROP or IPOPT (``settings.fatrop``) on :func:`path_nlp`'s NLP; ``warm`` (IPOPT
+    """FATROP or IPOPT (``settings.fatrop``) on :func:`assembled_nlp`'s NLP; ``warm`` (IPOPT
     only): continuing from a solution and its multipliers; ``monotone``: IPOPT with the
     monotone barrier (:data:`MONOTONE`)."""
     layout, nlp = assembled_nlp(segments, intervals, objectives, settings.timing)
