@@ -200,26 +200,17 @@ def assemble(
     f = ca.sum2(term)
 
     # the Jacobian: intervals' nonzeros, landmarks', intervals' time gradients, then ±1
-    interval_pattern = jacobian.sparsity_out(2)
-    local_rows, local_cols = (np.asarray(v) for v in interval_pattern.get_triplet())
-    k = np.repeat(np.arange(m), interval_pattern.nnz())
-    row0 = layout.interval_rows().ravel()
-    entries = [(row0[k] + np.tile(local_rows, m), z_index[np.tile(local_cols, m), k])]
-    landmark_pattern = landmark_jacobian.sparsity_out(1)
-    l_rows, l_cols = (np.asarray(v) for v in landmark_pattern.get_triplet())
-    j = np.repeat(np.arange(segments - 1), landmark_pattern.nnz())
-    landmark0 = layout.landmark_rows()
-    entries.append(
-        (
-            landmark0[j] + STATE + np.tile(l_rows, segments - 1),
-            w_index[np.tile(l_cols, segments - 1), j],
-        )
-    )
+    row0, landmark0 = layout.interval_rows().ravel(), layout.landmark_rows()
+    interval_rows = row0 + np.arange(ROWS)[:, None]
+    continuity_rows = landmark0 + STATE + np.arange(LANDMARK_ROWS)[:, None]
+    entries = [
+        _block_triplets(jacobian.sparsity_out(2), interval_rows, z_index),
+        _block_triplets(landmark_jacobian.sparsity_out(1), continuity_rows, w_index),
+    ]
     time_rows = _time_rows(layout)
-    k = np.repeat(np.arange(m), Z)
     if layout.timed:
-        entries.append((time_rows[k], z_index[np.tile(np.arange(Z), m), k]))
-    gaps = (row0[:, None] + np.arange(STATE)).ravel()
+        entries.append((np.repeat(time_rows, Z), z_index.T.ravel()))
+    gaps = interval_rows[:STATE].T.ravel()
     landmark_gaps = (landmark0[:, None] + np.arange(STATE)).ravel()
     plus = [(gaps, next_index.T.ravel()), (landmark_gaps, first_states.T.ravel())]
     minus = [(landmark_gaps, layout.transitions().ravel())]
@@ -242,22 +233,16 @@ def assemble(
     grad_f = ca.densify(gradient(ca.vec(grad_term)))  # IPOPT reads it dense
 
     lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", n_g)
-    multipliers = gather(lam_g, (row0[:, None] + np.arange(ROWS)).T)
+    multipliers = gather(lam_g, interval_rows)
     lam_time = gather(lam_g, time_rows[None, :]) if layout.timed else ca.DM.zeros(1, m)
-    landmark_lam = gather(lam_g, (landmark0[:, None] + STATE + np.arange(LANDMARK_ROWS)).T)
+    landmark_lam = gather(lam_g, continuity_rows)
     hess = hessian.map(m)(*arguments, lam_f, multipliers, lam_time)
     (hess_landmarks,) = _mapped(landmark_hessian, segments - 1, [*landmark_arguments, landmark_lam])
-    h_pattern, l_pattern = hessian.sparsity_out(0), landmark_hessian.sparsity_out(0)
-    h_rows, h_cols = (np.asarray(v) for v in h_pattern.get_triplet())
-    lh_rows, lh_cols = (np.asarray(v) for v in l_pattern.get_triplet())
-    k = np.repeat(np.arange(m), h_pattern.nnz())
-    j = np.repeat(np.arange(segments - 1), l_pattern.nnz())
-    first = np.concatenate(
-        [z_index[np.tile(h_rows, m), k], w_index[np.tile(lh_rows, segments - 1), j]]
-    )
-    second = np.concatenate(
-        [z_index[np.tile(h_cols, m), k], w_index[np.tile(lh_cols, segments - 1), j]]
-    )
+    blocks = [
+        _block_triplets(hessian.sparsity_out(0), z_index, z_index),
+        _block_triplets(landmark_hessian.sparsity_out(0), w_index, w_index),
+    ]
+    first, second = (np.concatenate(parts) for parts in zip(*blocks, strict=True))
     hess_lag = scatter(first, second, np.ones(len(first)), (n, n))(
         ca.vertcat(hess.nz[:], hess_landmarks.nz[:])
     )
@@ -276,6 +261,21 @@ def _time_rows(layout: PathLayout) -> np.ndarray:
     segment = np.repeat(np.arange(layout.segments), layout.intervals)
     per_segment = layout.timed == layout.segments
     return layout.rows - layout.timed + (segment if per_segment else 0 * segment)
+
+
+def _block_triplets(
+    pattern: ca.Sparsity, rows: np.ndarray, columns: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The global (rows, columns) of ``pattern``'s nonzeros repeated over blocks, in the
+    order a map's outputs hold them: block b's local row r is row rows[r, b], its local
+    column c column columns[c, b]."""
+    local_rows, local_columns = (np.asarray(v) for v in pattern.get_triplet())
+    blocks = rows.shape[1]
+    block = np.repeat(np.arange(blocks), pattern.nnz())
+    return (
+        rows[np.tile(local_rows, blocks), block],
+        columns[np.tile(local_columns, blocks), block],
+    )
 
 
 def _mapped(function: ca.Function, count: int, arguments: list) -> list[ca.MX]:

@@ -50,7 +50,7 @@ from spm_opt.planners.ocp.path_nlp import (
     TERMS,
     advance,
 )
-from spm_opt.planners.ocp.path_solver import assembled_nlp, solver
+from spm_opt.planners.ocp.path_solver import FATROP, IPOPT, MONOTONE_IPOPT, assembled_nlp, solver
 from spm_opt.planners.ocp.refinement import REFINEMENTS, tightened
 from spm_opt.planners.ocp.settings import OcpSettings
 from spm_opt.problem import Problem
@@ -77,9 +77,6 @@ energy's 1e-4: weighed here, it traded ∫τᵀτ for smoothness, so that on the
 minimum-energy plan took 0.03 % more effort than the minimum-time one)."""
 SAMPLES_PER_INTERVAL = 4
 """Samples of the plan per interval of the grid."""
-MONOTONE_IPOPT = "ipopt, monotone barrier"
-"""The last solver a path-coordinate plan tries
-(:data:`~spm_opt.planners.ocp.path_solver.MONOTONE`)."""
 FATROP_CONVERGED = "Success"
 """The status a FATROP solve that converged leaves in the plan's statistics (IPOPT's is
 its own, :data:`~spm_opt.planners.ocp.ipopt.CONVERGED`)."""
@@ -303,18 +300,8 @@ def _solve(
     and status added to ``statistics``; a :class:`PlanningError` when none converges."""
     fatrop = settings.fatrop and not (warm and settings.solver == "auto")
     tried = []
-    for chosen in (*(["fatrop"] if fatrop else []), "ipopt", MONOTONE_IPOPT):
-        with_chosen = dataclasses.replace(
-            settings, solver="fatrop" if chosen == "fatrop" else "ipopt"
-        )
-        solving_with = solver(
-            layout.segments,
-            layout.intervals,
-            with_chosen,
-            weighed,
-            warm,
-            monotone=chosen == MONOTONE_IPOPT,
-        )
+    for method in (*([FATROP] if fatrop else []), IPOPT, MONOTONE_IPOPT):
+        solving_with = solver(layout.segments, layout.intervals, settings, weighed, warm, method)
         solving = time.perf_counter()
         solution = interrupt.solve(solving_with, **arguments)
         stats = solving_with.stats()
@@ -323,14 +310,14 @@ def _solve(
         statistics["function_time_s"] += sum(
             v for k, v in stats.items() if k.startswith("t_wall_nlp")
         )
-        if chosen == "fatrop":
+        if method == FATROP:
             converged = bool(stats["success"])
             status = FATROP_CONVERGED if converged else f"return code {stats['return_status']}"
         else:
             status = stats["return_status"]
             converged = status == ipopt.CONVERGED
-        statistics.update(solver=chosen, status=status)
-        tried.append(f"{chosen} stopped with {status} after {stats['iter_count']} iterations")
+        statistics.update(solver=method, status=status)
+        tried.append(f"{method} stopped with {status} after {stats['iter_count']} iterations")
         if converged:
             return solution
     raise PlanningError(f"{name}: {'; '.join(tried)} in path coordinates")

@@ -73,6 +73,10 @@ sweep's flap 49, minimum jerk (fixed total time) took more than 300 iterations w
 adaptive barrier and 72 with the monotone one."""
 
 
+FATROP, IPOPT, MONOTONE_IPOPT = "fatrop", "ipopt", "ipopt, monotone barrier"
+"""The ways :func:`solver` solves: FATROP, IPOPT, and IPOPT with :data:`MONOTONE`."""
+
+
 @cache
 def solver(
     segments: int,
@@ -80,17 +84,17 @@ def solver(
     settings: OcpSettings,
     objectives: tuple[str, ...],
     warm: bool,
-    monotone: bool = False,
+    method: str,
 ) -> Solver:
-    """FATROP or IPOPT (``settings.fatrop``) on :func:`assembled_nlp`'s NLP; ``warm`` (IPOPT
-    only): continuing from a solution and its multipliers; ``monotone``: IPOPT with the
-    monotone barrier (:data:`MONOTONE`)."""
+    """``method`` (:data:`FATROP`, :data:`IPOPT` or :data:`MONOTONE_IPOPT`) on
+    :func:`assembled_nlp`'s NLP; ``warm`` (IPOPT only): continuing from a solution and its
+    multipliers."""
     layout, nlp = assembled_nlp(segments, intervals, objectives, settings.timing)
-    if settings.fatrop:
+    if method == FATROP:
         return _fatrop(layout, nlp, settings, objectives)
     chosen = ipopt.options(settings, warm, acceptable_iterations=0)
     options = {
-        "ipopt": {**chosen, **ORDERING, **(MONOTONE if monotone else {})},
+        "ipopt": {**chosen, **ORDERING, **(MONOTONE if method == MONOTONE_IPOPT else {})},
         "print_time": False,
         "calc_lam_p": False,
     }
