@@ -8,12 +8,17 @@ for brain surgery.
     table = so.compare(problem)  # every planner, one row each (a pandas DataFrame)
     result = so.execute(trajectory, backend=so.SimulatedRobot(problem.robot,
                         start_rad=trajectory.position(0.0)), problem=problem, log="run.csv")
+
+Each name is imported from its module when it is first used, so that importing the
+package (and the ``spm-opt`` command, which lives in it) costs nothing until then.
 """
 
-import logging
+from __future__ import annotations
 
-from spm_opt.comparison import compare
-from spm_opt.contour import Contour
+import importlib
+import logging
+from typing import TYPE_CHECKING, Any
+
 from spm_opt.errors import (
     InputError,
     MissingDependency,
@@ -22,16 +27,60 @@ from spm_opt.errors import (
     UnknownPlannerError,
     UnreachableError,
 )
-from spm_opt.evaluate import Report, Violation, evaluate
-from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_log
-from spm_opt.model.dynamics import inverse_dynamics, mechanical_energy
-from spm_opt.model.params import Robot, load_robot
-from spm_opt.planners import PLANNERS, plan
-from spm_opt.problem import Limits, Problem, load_problem
-from spm_opt.sweep.results import load_sweep
-from spm_opt.trajectory import Trajectory, package_version
 
-__version__ = package_version()
+if TYPE_CHECKING:
+    from spm_opt.comparison import compare
+    from spm_opt.contour import Contour
+    from spm_opt.evaluate import Report, Violation, evaluate
+    from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_log
+    from spm_opt.model.dynamics import inverse_dynamics, mechanical_energy
+    from spm_opt.model.params import Robot, load_robot
+    from spm_opt.planners import PLANNERS, plan
+    from spm_opt.problem import Limits, Problem, load_problem
+    from spm_opt.sweep.results import load_sweep
+    from spm_opt.trajectory import Trajectory
+
+_HOMES = {
+    "compare": "spm_opt.comparison",
+    "Contour": "spm_opt.contour",
+    "Report": "spm_opt.evaluate",
+    "Violation": "spm_opt.evaluate",
+    "evaluate": "spm_opt.evaluate",
+    "ExecutionSettings": "spm_opt.execution",
+    "SimulatedRobot": "spm_opt.execution",
+    "execute": "spm_opt.execution",
+    "read_log": "spm_opt.execution",
+    "inverse_dynamics": "spm_opt.model.dynamics",
+    "mechanical_energy": "spm_opt.model.dynamics",
+    "Robot": "spm_opt.model.params",
+    "load_robot": "spm_opt.model.params",
+    "PLANNERS": "spm_opt.planners",
+    "plan": "spm_opt.planners",
+    "Limits": "spm_opt.problem",
+    "Problem": "spm_opt.problem",
+    "load_problem": "spm_opt.problem",
+    "load_sweep": "spm_opt.sweep.results",
+    "Trajectory": "spm_opt.trajectory",
+}
+"""The module each lazily imported name comes from."""
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name from its module on first use (PEP 562)."""
+    if name == "__version__":
+        from spm_opt.version import package_version
+
+        return package_version()
+    if name not in _HOMES:
+        raise AttributeError(f"module 'spm_opt' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_HOMES[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_HOMES, "__version__"})
+
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 

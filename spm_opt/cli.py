@@ -11,22 +11,18 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 import textwrap
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from spm_opt.errors import InputError, PlanningError, RunInterrupted, SpmOptError, require
-from spm_opt.execution.tracking import TRACKING_MODES
 from spm_opt.output_paths import check_output_directory, check_output_file
-from spm_opt.planners import PLANNERS
-from spm_opt.sweep.spec import DEFAULT_MAX_TASKS
-from spm_opt.trajectory import package_version
+from spm_opt.version import package_version
 
 if TYPE_CHECKING:
     from spm_opt.evaluate import Report
@@ -67,6 +63,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _parser() -> argparse.ArgumentParser:
+    from spm_opt.planners import PLANNERS
+    from spm_opt.sweep.spec import DEFAULT_MAX_TASKS
+
     parser = _Parser(
         prog="spm-opt",
         description=_DESCRIPTION,
@@ -256,6 +255,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _execute_parser(commands: argparse._SubParsersAction) -> None:
+    from spm_opt.execution.tracking import TRACKING_MODES
+
     execute = commands.add_parser(
         "execute", help="run a trajectory CSV on the simulated robot or the Dynamixel actuators"
     )
@@ -387,6 +388,8 @@ def _emulate_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _pair(text: str, option: str, kind: type) -> tuple:
+    import numpy as np
+
     parts = text.split(",")
     try:
         values = tuple(kind(p) for p in parts)
@@ -398,6 +401,8 @@ def _pair(text: str, option: str, kind: type) -> tuple:
 
 
 def _execute(args: argparse.Namespace) -> None:
+    import numpy as np
+
     from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
     from spm_opt.execution.console import console
     from spm_opt.model.params import load_robot
@@ -504,6 +509,8 @@ class GateFailed(Exception):
 
 
 def _emulate(args: argparse.Namespace) -> None:
+    import numpy as np
+
     from spm_opt.execution.emulator import parse_faults, serve
     from spm_opt.model.params import load_robot
     from spm_opt.problem import load_problem
@@ -772,16 +779,36 @@ def _log_to_stderr(verbosity: int) -> logging.Handler:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status."""
-    args = _parser().parse_args(argv)
-    logger = logging.getLogger("spm_opt")
-    level = logger.level
-    handler = _log_to_stderr(args.verbose)
+    """Run the command line; returns the exit status. A Ctrl-C at any point of it, while
+    the command's modules are imported too, ends it with one line and status 130."""
     try:
-        return _run(args)
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(level)
+        args = _parser().parse_args(argv)
+        logger = logging.getLogger("spm_opt")
+        level = logger.level
+        handler = _log_to_stderr(args.verbose)
+        try:
+            return _run(args)
+        finally:
+            logger.removeHandler(handler)
+            logger.setLevel(level)
+    except KeyboardInterrupt:
+        return _interrupted()
+
+
+def console() -> NoReturn:
+    """The ``spm-opt`` program: :func:`main`, then exit. The exit may wait for a compiler
+    the command started (:mod:`spm_opt.planners.ocp.nlp_library`); a Ctrl-C then ends the
+    process at once, in one line, with status 130."""
+    status = main()
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _end_at_once)
+    sys.exit(status)
+
+
+def _end_at_once(_signum: int, _frame: Any) -> None:
+    """SIGINT after :func:`main` returned: what the command wrote stands; end now."""
+    os.write(2, b"spm-opt: interrupted while ending (a background compile is left unfinished)\n")
+    os._exit(130)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -807,18 +834,19 @@ def _run(args: argparse.Namespace) -> int:
         print(f"spm-opt: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("spm-opt: interrupted: nothing written", file=sys.stderr)
-        _second_interrupt_ends()
-        return 130
+        return _interrupted()
     return 0
 
 
-def _second_interrupt_ends() -> None:
-    """Let a second Ctrl-C end the process at once: the exit may wait for a compile the
-    interrupted planner started (:mod:`spm_opt.planners.ocp.nlp_library`)."""
+def _interrupted() -> int:
+    """After a Ctrl-C: a second one ends the process at once (the exit may wait for a
+    compile the interrupted planner started, :mod:`spm_opt.planners.ocp.nlp_library`);
+    one line; status 130."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_DFL)
+    print("spm-opt: interrupted: nothing written", file=sys.stderr)
+    return 130
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    console()

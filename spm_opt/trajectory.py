@@ -21,7 +21,6 @@ import io
 import json
 import math
 from collections.abc import Iterator
-from importlib import metadata as package_metadata
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +40,7 @@ from spm_opt.input_limits import (
     read_bytes,
 )
 from spm_opt.model import kinematics
+from spm_opt.version import package_version
 
 COLUMNS = ("t", "q1", "q2", "qd1", "qd2", "qdd1", "qdd2")
 MAX_GRID_SAMPLES = 50_000_000
@@ -54,13 +54,6 @@ _SIDE_STEP_S = 1e-9
 COLUMN_SUMS_FROM = 256
 """Samples from which :class:`_BernsteinSums` sums each output on its own (it breaks even
 at about 200)."""
-
-
-def package_version() -> str:
-    try:
-        return package_metadata.version("spm_opt")
-    except package_metadata.PackageNotFoundError:
-        return "unknown"
 
 
 class Trajectory:

@@ -13,7 +13,7 @@ from test_bad_inputs import assert_one_error, run_cli
 from spm_opt import cli
 from spm_opt.errors import PlanningError
 from spm_opt.planners import PLANNERS
-from spm_opt.trajectory import package_version
+from spm_opt.version import package_version
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = str(ROOT / "problems" / "craniotomy_bone_flap.toml")

@@ -58,10 +58,12 @@ def test_a_solve_without_sigint_returns_its_solution():
     assert float(solve(solver, x0=0.0)["x"]) == pytest.approx(2.0)
 
 
-def _interrupt_when(arguments: list[str], cue: str, cwd: Path) -> tuple[int, list[str]]:
-    """Run ``spm-opt -v ARGUMENTS``, send SIGINT once a stderr line holds ``cue``; returns
-    the exit status and the stderr lines."""
-    command = [sys.executable, "-m", "spm_opt.cli", "-v", *arguments]
+def _interrupt_when(
+    arguments: list[str], cue: str, cwd: Path, python: tuple[str, ...] = ()
+) -> tuple[int, list[str]]:
+    """Run ``python PYTHON -m spm_opt.cli -v ARGUMENTS``, send SIGINT once a stderr line
+    holds ``cue``; returns the exit status and the stderr lines."""
+    command = [sys.executable, *python, "-m", "spm_opt.cli", "-v", *arguments]
     process = subprocess.Popen(
         command, cwd=cwd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True
     )
@@ -95,6 +97,18 @@ def _assert_stopped(status: int, lines: list[str], out: Path) -> None:
         assert not [p for p in out.parent.iterdir() if p.name.endswith(".tmp")]
 
 
+@pytest.mark.parametrize("module", ["numpy", "scipy.interpolate", "casadi", "pandas"])
+def test_sigint_while_the_command_imports_is_one_line_and_130(tmp_path, module):
+    """``-X importtime`` writes a line as each module's import ends: the signal goes out
+    when the one named has been imported, while the modules that import it still are."""
+    out = tmp_path / "plan.csv"
+    arguments = ["plan", str(PAPER), "--planner", "ocp-min-time", "--out", str(out)]
+    status, lines = _interrupt_when(arguments, f" {module}\n", tmp_path, ("-X", "importtime"))
+    _assert_stopped(status, lines, out)
+    said = [line for line in lines if not line.startswith("import time:")]
+    assert said == ["spm-opt: interrupted: nothing written"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("planner", "problem"), [("ocp-min-energy", PAPER), ("excitation", IDENTIFICATION)]
@@ -121,3 +135,18 @@ def test_sigint_mid_fit_ends_identify_with_130_and_no_robot_file(tmp_path):
     status, lines = _interrupt_when(arguments, "identify: ", tmp_path)
     _assert_stopped(status, lines, out)
     assert not out.with_suffix(".md").exists() and not out.with_suffix(".png").exists()
+
+
+def test_the_package_and_the_command_import_nothing_heavy_until_used():
+    """So that a Ctrl-C in ``main`` finds its handler (and ``--version`` starts at once):
+    the modules a command needs are imported inside it."""
+    code = (
+        "import sys, spm_opt, spm_opt.cli\n"
+        "heavy = [m for m in ('numpy', 'casadi', 'scipy', 'pandas', 'matplotlib') "
+        "if m in sys.modules]\n"
+        "print(heavy)\n"
+        "missing = [n for n in spm_opt.__all__ if getattr(spm_opt, n, None) is None]\n"
+        "print(missing, spm_opt.__version__ == spm_opt.cli.package_version())"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.splitlines() == ["[]", "[] True"]

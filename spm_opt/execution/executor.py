@@ -64,7 +64,8 @@ from spm_opt.execution.tracking import Lead, following_error_limit
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
 from spm_opt.ruckig_local import calculate_locally
-from spm_opt.trajectory import Trajectory, package_version
+from spm_opt.trajectory import Trajectory
+from spm_opt.version import package_version
 
 _LOG = logging.getLogger(__name__)
 

@@ -11,7 +11,8 @@ from typing import Any, Protocol, TypeVar
 from spm_opt.errors import InputError, PlanningError, UnknownPlannerError
 from spm_opt.problem import Problem
 from spm_opt.skull.depth import depth_setpoint
-from spm_opt.trajectory import Trajectory, package_version
+from spm_opt.trajectory import Trajectory
+from spm_opt.version import package_version
 
 
 class Planner(Protocol):

@@ -34,7 +34,8 @@ from spm_opt.fields import parse_toml
 from spm_opt.input_limits import MAX_TOML_BYTES, decode_text, excerpt, read_bytes
 from spm_opt.planners import plan
 from spm_opt.problem import load_problem
-from spm_opt.trajectory import Trajectory, package_version
+from spm_opt.trajectory import Trajectory
+from spm_opt.version import package_version
 
 MACHINE = "machine"
 """``failure`` of a row that failed for the machine's reasons: retried on resume."""
