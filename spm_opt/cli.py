@@ -477,10 +477,14 @@ _SETTING_OPTIONS = {
 
 
 def _outcome(result: ExecutionResult) -> str:
-    """A run that did not succeed, in one line: why, and after a safe stop how far each
-    joint travelled after the fault and when rest was proven."""
+    """A run that did not succeed, in one line: why, after a safe stop how far each joint
+    travelled after the fault and when rest was proven, and what a failed log kept."""
+    log, kept = result.log, ""
+    if log is not None and log.fault:
+        failed = "" if log.fault in result.reason else f"log failed: {log.fault}; "
+        kept = f"; {failed}{log.summary()}"
     if result.stop is None:
-        return result.reason
+        return result.reason + kept
     stop = result.stop
     line = f"safe stop: {result.reason}"
     if stop.travel_deg is not None:
@@ -488,8 +492,8 @@ def _outcome(result: ExecutionResult) -> str:
             f"theta{j + 1} {travel:.2f} deg" for j, travel in enumerate(stop.travel_deg)
         )
     if stop.duration_s is not None:
-        return f"{line}; at rest {stop.duration_s:.2f} s after it"
-    return f"{line}; rest {stop.rest}"
+        return f"{line}; at rest {stop.duration_s:.2f} s after it{kept}"
+    return f"{line}; rest {stop.rest}{kept}"
 
 
 def _keys_terminal(interactive: bool) -> int | None:

@@ -3,27 +3,29 @@
 Pre-flight (:mod:`spm_opt.execution.preflight`), the plan must have been made for this
 problem, start and end at rest, and keep every limit that judges the robot. The robot must
 be where the plan starts, or, on request, is first brought there by a jerk-limited ruckig
-approach. A stop asked for before or during :meth:`Executor.run` is honoured (and
-forgotten when the run ends): before connecting, the run ends with nothing moved or written
+approach. A stop asked for before or during :meth:`Executor.run` is honoured (and forgotten
+when the run ends): before connecting, the run ends with nothing moved or written
 (:class:`~spm_opt.errors.RunInterrupted`); after, in the first control cycle, before any
-goal of the plan goes out. Then a fixed-rate loop on the backend's
-clock reads both actuators, checks them, writes the next goal positions and logs the
-sample. The goals follow the plan at the operator's feed (:mod:`spm_opt.execution.feed`):
-held, resumed and overridden from any thread, always on the planned path; a hold where the
-plan leaves no room for a stop on the path (:mod:`spm_opt.hold_room`) is the safe stop
-below, at once (the log's feed events say "no room: safe stop").
-On a hardware error, a following error beyond the tolerance, a run of cycles with a
-failed read or write longer than the retry budget, SIGINT or SIGTERM, any other exception
-raised by the backend or in the loop, the robot is brought
-to rest by a jerk-limited ruckig stop that starts, in the cycle that saw the fault, from
-the last goal the actuators received (so the goal stream stays continuous: starting from
-the measured position would make the goal jump back by the following error, and a goal
-whose write failed never reached them). It then holds there until rest is proven: every
-sample over a window below the rest speed and each joint's position within a few encoder
-pulses. The log's header reports how long the stop took and how far each joint moved.
-A run is a success only when it completed and rest was proven at its end
-(:attr:`ExecutionResult.succeeded`). The log's times start at 0 at the loop's start; the
-header's ``clock_origin_s`` is that moment on the backend's clock.
+goal of the plan goes out. Then a fixed-rate loop on the backend's clock reads both
+actuators, checks them, writes the next goal positions and logs the sample (queued in
+memory: a thread of the log's own writes it, :mod:`spm_opt.execution.log`, so the loop and
+the stop never wait on the disk). The goals follow the plan at the operator's feed
+(:mod:`spm_opt.execution.feed`): held, resumed and overridden from any thread, always on
+the planned path; a hold where the plan leaves no room for a stop on the path
+(:mod:`spm_opt.hold_room`) is the safe stop below, at once (the log's feed events say "no
+room: safe stop"). On a hardware error, a following error beyond the tolerance, a run of
+cycles with a failed read or write longer than the retry budget, a log write that failed or
+stalls (in the approach, the plan and the settle; during the stop and the hold the samples
+wait in memory), SIGINT or SIGTERM, any other exception raised by the backend or in the
+loop, the robot is brought to rest by a jerk-limited ruckig stop that starts, in the cycle
+that saw the fault, from the last goal the actuators received (so the goal stream stays
+continuous: starting from the measured position would make the goal jump back by the
+following error, and a goal whose write failed never reached them). It then holds there
+until rest is proven: every sample over a window below the rest speed and each joint's
+position within a few encoder pulses. The log's header reports how long the stop took and
+how far each joint moved. A run is a success only when it completed and rest was proven at
+its end (:attr:`ExecutionResult.succeeded`). The log's times start at 0 at the loop's
+start; the header's ``clock_origin_s`` is that moment on the backend's clock.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import signal
 import threading
 import time
@@ -54,7 +57,7 @@ from spm_opt.execution.backend import (
     hardware_error_names,
 )
 from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace, feed_ceiling
-from spm_opt.execution.log import LogWriter
+from spm_opt.execution.log import LogWriter, Write
 from spm_opt.execution.preflight import degrees
 from spm_opt.execution.realtime import frozen_heap
 from spm_opt.execution.rest import FeedHoldWatch, RestWindow
@@ -154,14 +157,21 @@ class Executor:
         The robot and the limits the plan is checked against.
     backend : Backend
     settings : ExecutionSettings, optional
+    log_write : callable, optional
+        The system call that writes the log's lines (``os.write``; a test's failing disk).
     """
 
     def __init__(
-        self, problem: Problem, backend: Backend, settings: ExecutionSettings | None = None
+        self,
+        problem: Problem,
+        backend: Backend,
+        settings: ExecutionSettings | None = None,
+        log_write: Write = os.write,
     ) -> None:
         self.problem = problem
         self.backend = backend
         self.settings = settings or ExecutionSettings()
+        self._log_write = log_write
         self._torque_map = problem.robot.actuator.current_map
         self._stop_requested: str | None = None
         self._signals_seen: list[str] = []
@@ -298,27 +308,30 @@ class Executor:
         header: dict[str, Any],
     ) -> ExecutionResult:
         settings = self.settings
+        header = {
+            **header,
+            "plan": trajectory.metadata,
+            "plan_duration_s": trajectory.duration,
+            "problem": self.problem.record(),
+            "backend": self.backend.describe(),
+            "settings": dataclasses.asdict(settings),
+            "feed_ceiling": self._requests.ceiling,
+            "tracking": {
+                "mode": settings.tracking,
+                "lead_rate_s": self._lead.rate_s.tolist(),
+                "lead_acceleration_s2": self._lead.acceleration_s2.tolist(),
+            },
+            "software_version": package_version(),
+            "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        }
+        preflight.check_log_room(log_path, self._longest_run_s(trajectory, approach), header)
         self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
         self._writer = LogWriter(
             log_path,
-            {
-                **header,
-                "plan": trajectory.metadata,
-                "plan_duration_s": trajectory.duration,
-                "problem": self.problem.record(),
-                "backend": self.backend.describe(),
-                "settings": dataclasses.asdict(settings),
-                "feed_ceiling": self._requests.ceiling,
-                "tracking": {
-                    "mode": settings.tracking,
-                    "lead_rate_s": self._lead.rate_s.tolist(),
-                    "lead_acceleration_s2": self._lead.acceleration_s2.tolist(),
-                },
-                "clock_origin_s": self._ticker.origin,
-                "software_version": package_version(),
-                "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-            },
+            {**header, "clock_origin_s": self._ticker.origin},
             settings.flush_interval_s,
+            settings.log_stall_s,
+            self._log_write,
         )
         self._feed_events, self._pace = [], None
         self._plan_duration = trajectory.duration
@@ -348,7 +361,7 @@ class Executor:
             at_rest = report.at_rest if report is not None else at_rest
             statistics = LoopStatistics.from_ticks(self._ticker.ticks, self._ticker.period)
             backend_state = self.backend.describe()
-            self._writer.close(
+            log = self._writer.close(
                 {
                     "completed": completed,
                     "reason": reason,
@@ -373,6 +386,21 @@ class Executor:
             report,
             list(self._signals_seen),
             list(self._feed_events),
+            log,
+        )
+
+    def _longest_run_s(self, trajectory: Trajectory, approach: _Segment | None) -> float:
+        """How long the run may log for, s, if nobody holds the feed: the approach, the
+        plan at its starting feed, the settle, a stop from the speed limit and the hold."""
+        limits = self.settings.joint_limits(self.problem)
+        feed = min(self.settings.feed, self._requests.ceiling)
+        stop = limits.speed / limits.acceleration + limits.acceleration / limits.jerk
+        return (
+            (approach.duration if approach is not None else 0.0)
+            + trajectory.duration / feed
+            + self.settings.settle_s
+            + stop
+            + self.settings.hold_s
         )
 
     # ------------------------------------------------------------------ phases
@@ -638,6 +666,8 @@ class Executor:
             reason = self._communication_lost(self._failed_cycles, cycle)
             cycle.notes.append(reason)
         self._log(phase, cycle)
+        if checked and not reason and self._writer.fault:
+            reason = f"log failed: {self._writer.fault}"
         if reason:
             raise _Stop(reason, cycle, logged=True)
 

@@ -1,17 +1,32 @@
 """The execution log: a CSV written while the robot moves, and its JSON header.
 
-Samples are appended as they are read and reach the file in whole lines, one ``write``
-call at least every ``flush_interval_s`` (0.1 s), so that a crash (even ``kill -9``) leaves
-a valid CSV of every sample up to the last flush. The header beside it (``run.json`` for
-``run.csv``) holds the plan, the problem, the backend and the settings; it is written when
-the run starts and replaced, whole, with the outcome and the loop statistics when it ends.
+The control thread never touches the disk. :meth:`LogWriter.append` formats a sample's line
+and queues it in memory; a writer thread of its own writes the queued lines at least every
+``flush_interval_s`` (0.1 s), whole lines only, so that a crash (even ``kill -9``) leaves a
+valid CSV of every sample up to the last write. A write that fails (a full disk, EIO, a
+read-only remount) or that stalls for ``stall_s`` (a network share that hangs) is the
+writer's :attr:`~LogWriter.fault`, which the executor turns into a safe stop; the stop and
+its rest proof go on whatever the disk does, their samples kept in memory (up to
+:data:`MAX_PENDING_BYTES`) and written if the disk comes back. A write that stops part way
+through a line is cut back to the last whole line.
+
+The header beside the CSV (``run.json`` for ``run.csv``) holds the plan, the problem, the
+backend and the settings; it is written when the run starts and replaced, whole, with the
+outcome, the loop statistics and what the log kept (``log``) when it ends. Room for that
+replacement is set aside when the run starts (a hidden ``.run.json.reserve`` beside it,
+removed at the end), so that a disk the run filled still takes the outcome.
 """
 
 from __future__ import annotations
 
+import collections
+import contextlib
+import errno
 import json
 import os
+import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from spm_opt.errors import InputError
+from spm_opt.execution.results import LogReport
 from spm_opt.files import json_default, write_atomically
 
 COLUMNS = (
@@ -53,35 +69,99 @@ hold after the cycle, the reference led by the position loop's lag (see
 :mod:`spm_opt.execution.tracking`; a failed write leaves the last reference and goal
 delivered); measured values are empty in a cycle whose read failed."""
 
+LINE_BYTES = 320
+"""Bytes a sample's line may take, for the room a log needs (:func:`bytes_needed`): a line
+whose every number is negative with an exponent is 285 bytes with an "ok" status; the
+lines of toppra's run of ``craniotomy_hardware.toml`` on the simulated robot average 162
+bytes, at most 199."""
+
+MAX_PENDING_BYTES = 64_000_000
+"""Lines the disk has not taken are kept in memory up to this many bytes (about 200,000
+samples, over half an hour at 100 Hz); later ones are counted as lost."""
+
+RESERVE_BYTES = 65_536
+"""Room set aside for the header's last version, at least (four times the first one's
+size when that is more)."""
+
+Write = Callable[[int, bytes], int]
+"""``os.write``'s shape: (file descriptor, data) → bytes written."""
+
 
 def header_path(log_path: Path) -> Path:
     """The JSON header beside a CSV log."""
     return log_path.with_suffix(".json")
 
 
-class LogWriter:
-    """Appends samples to a CSV log; flushes whole lines at least every ``flush_interval_s``.
+def bytes_needed(samples: float, header: dict[str, Any]) -> int:
+    """Disk space a log of ``samples`` lines with ``header`` takes at most, bytes: the
+    lines, the header twice (its temporary copy when replaced) and the reserve."""
+    header_bytes = len(_header_text(header))
+    return int(samples * LINE_BYTES) + 2 * header_bytes + max(RESERVE_BYTES, 4 * header_bytes)
 
-    The file is opened with O_APPEND and written with ``os.write`` of complete lines only,
-    never through a buffer that could split a line.
+
+def _header_text(header: dict[str, Any]) -> str:
+    return json.dumps(header, indent=2, default=json_default) + "\n"
+
+
+class LogWriter:
+    """Queues samples from the control thread; a thread of its own writes them.
+
+    Parameters
+    ----------
+    path : Path
+        The CSV log; its header goes beside it (:func:`header_path`).
+    header : dict
+        What the header holds when the run starts.
+    flush_interval_s : float, s
+        Longest time a queued line waits before the writer tries to write it.
+    stall_s : float, s
+        A write that has not returned after this long is a :attr:`fault`.
+    write : callable
+        The system call that writes (``os.write``; a test's failing or blocking disk).
+
+    The CSV's first line and the header are written here, before the writer starts: an
+    OSError then means nothing was logged.
     """
 
-    def __init__(self, path: Path, header: dict[str, Any], flush_interval_s: float = 0.1) -> None:
+    def __init__(
+        self,
+        path: Path,
+        header: dict[str, Any],
+        flush_interval_s: float = 0.1,
+        stall_s: float = 1.0,
+        write: Write = os.write,
+    ) -> None:
         self.path = Path(path)
         self.header = dict(header)
-        self.flush_interval_s = flush_interval_s
-        self._pending: list[str] = []
-        self._last_flush = time.monotonic()
+        self.flush_interval_s, self.stall_s = flush_interval_s, stall_s
+        self._write = write
         self.samples = 0
-        write_atomically(
-            {
-                self.path: ",".join(COLUMNS) + "\n",
-                header_path(self.path): json.dumps(self.header, indent=2, default=json_default)
-                + "\n",
-            }
-        )
+        """Samples appended (queued), whether or not the disk took them."""
+        text = _header_text(self.header)
+        self._reserve = self.path.with_name(f".{header_path(self.path).name}.reserve")
+        self._set_aside(max(RESERVE_BYTES, 4 * len(text)))
+        try:
+            write_atomically({self.path: ",".join(COLUMNS) + "\n", header_path(self.path): text})
+        except OSError:
+            self._reserve.unlink(missing_ok=True)
+            raise
         self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
+        self._size = os.fstat(self._fd).st_size  # bytes of whole lines in the file
+        self._queue: collections.deque[bytes] = collections.deque()
+        self._queued_bytes = 0  # the control thread's count
+        self._written_bytes = 0  # the writer's count
+        self._chunks: collections.deque[bytes] = collections.deque()  # the writer's own
+        self._written_lines = 0
+        self._fault: str | None = None
+        self._busy_since: float | None = None  # when the write under way began
+        self._closing = threading.Event()
+        self._wake = threading.Event()
+        self._final: dict[str, Any] | None = None
+        self._report: LogReport | None = None
+        self._thread = threading.Thread(target=self._run, name="log-writer", daemon=True)
+        self._thread.start()
 
+    # -------------------------------------------------------------- control thread
     def append(
         self,
         time_s: float,
@@ -93,9 +173,9 @@ class LogWriter:
         hardware_error: tuple[int, int] | None,
         status: str,
     ) -> None:
-        """One sample: ``along`` is (plan time, feed, feed target) or None, ``reference``
-        and ``goal`` positions (rad), ``measured`` (position, velocity, current, torque) or
-        None."""
+        """Queue one sample; never blocks, never raises an OSError. ``along`` is (plan
+        time, feed, feed target) or None, ``reference`` and ``goal`` positions (rad),
+        ``measured`` (position, velocity, current, torque) or None."""
         values = [f"{time_s:.9f}", phase]
         values += ["", "", ""] if along is None else [f"{v:.12g}" for v in along]
         values += [f"{v:.9g}" for v in (*reference, *goal)]
@@ -105,29 +185,162 @@ class LogWriter:
             values += [f"{v:.9g}" for part in measured for v in part]
         values += [str(e) for e in hardware_error] if hardware_error else ["", ""]
         values.append(status.replace(",", ";").replace("\n", " "))
-        self._pending.append(",".join(values) + "\n")
+        line = (",".join(values) + "\n").encode()
         self.samples += 1
-        if time.monotonic() - self._last_flush >= self.flush_interval_s:
-            self.flush()
+        if self._queued_bytes - self._written_bytes + len(line) > MAX_PENDING_BYTES:
+            return  # kept from the disk's comeback: lost
+        self._queued_bytes += len(line)
+        self._queue.append(line)
 
-    def flush(self) -> None:
-        """Write every pending line in one call."""
-        if self._pending:
-            data = "".join(self._pending).encode()
-            self._pending.clear()
-            while data:
-                data = data[os.write(self._fd, data) :]
-        self._last_flush = time.monotonic()
+    @property
+    def fault(self) -> str | None:
+        """Why the log is failing (a write that raised, or one that stalls), or None."""
+        if self._fault is not None:
+            return self._fault
+        since = self._busy_since
+        if since is not None and time.monotonic() - since > self.stall_s:
+            return f"a write to {self.path.name} has not returned for {self.stall_s:g} s"
+        return None
 
-    def close(self, outcome: dict[str, Any]) -> None:
-        """Flush, sync to disk and rewrite the header with the outcome."""
-        self.flush()
-        os.fsync(self._fd)
-        os.close(self._fd)
-        self.header.update(outcome)
-        write_atomically(
-            {header_path(self.path): json.dumps(self.header, indent=2, default=json_default) + "\n"}
+    def close(self, outcome: dict[str, Any]) -> LogReport:
+        """Write what is queued, sync, and replace the header with ``outcome`` and what the
+        log kept (its ``log`` entry), all in the writer thread; waits while it makes
+        progress, and at most ``stall_s`` for a write that does not return."""
+        self._final = dict(outcome)
+        self._closing.set()
+        self._wake.set()
+        while self._thread.is_alive():
+            self._thread.join(self.flush_interval_s)
+            since = self._busy_since
+            if since is not None and time.monotonic() - since > self.stall_s:
+                break
+        return self._report or self._describe(header_written=False)
+
+    # ---------------------------------------------------------------- the writer
+    def _run(self) -> None:
+        """The writer thread: write what is queued every flush interval, until closed;
+        then the last lines, the sync and the header."""
+        while not self._closing.is_set():
+            self._wake.wait(self.flush_interval_s)
+            self._wake.clear()
+            self._write_queued()
+        self._write_queued()
+        self._sync_and_close()
+        self._report = self._write_header()
+
+    @contextlib.contextmanager
+    def _busy(self) -> Iterator[None]:
+        """Within the block the writer waits on the disk: :attr:`fault` times it."""
+        self._busy_since = time.monotonic()
+        try:
+            yield
+        finally:
+            self._busy_since = None
+
+    def _write_queued(self) -> None:
+        """Take the queue's lines as one chunk and write the chunks in order, whole lines
+        only; a failure is the :attr:`fault` (the first one stays), and the chunk it met
+        and those after it wait for the next try (each is joined once: a long backlog
+        costs the control thread nothing)."""
+        queue, lines = self._queue, []
+        while queue:
+            lines.append(queue.popleft())
+        if lines:
+            self._chunks.append(b"".join(lines))
+        while self._chunks:
+            chunk, done = self._chunks[0], 0
+            with self._busy():
+                try:
+                    while done < len(chunk):
+                        done += self._write(self._fd, chunk[done:])
+                except OSError as error:
+                    self._fail(f"cannot write {self.path.name}", error)
+                    done = self._cut_to_whole_lines(chunk, done)
+            self._size += done
+            self._written_lines += chunk.count(b"\n", 0, done)
+            self._written_bytes += done
+            if done < len(chunk):
+                self._chunks[0] = chunk[done:]
+                return
+            self._chunks.popleft()
+
+    def _cut_to_whole_lines(self, chunk: bytes, done: int) -> int:
+        """After a write that stopped ``done`` bytes into ``chunk``: cut the file back to
+        the last whole line; the bytes of ``chunk`` that stay written."""
+        whole = chunk.rfind(b"\n", 0, done) + 1
+        if whole < done:
+            try:
+                os.ftruncate(self._fd, self._size + whole)
+            except OSError as error:
+                self._fail(f"cannot cut {self.path.name} back to its last whole line", error)
+                return done
+        return whole
+
+    def _fail(self, what: str, error: OSError) -> None:
+        """Record a failure: the first one is the :attr:`fault`, later ones its notes."""
+        message = f"{what} ({_reason(error)})"
+        if self._fault is None:
+            self._fault = message
+        elif message not in self._fault:
+            self._fault = f"{self._fault}; {message}"
+
+    def _sync_and_close(self) -> None:
+        """Flush the CSV to the disk and close it."""
+        try:
+            with self._busy():
+                os.fsync(self._fd)
+        except OSError as error:
+            self._fail(f"cannot sync {self.path.name}", error)
+        finally:
+            os.close(self._fd)
+
+    def _write_header(self) -> LogReport:
+        """Replace the header with the outcome and what the log kept, using the room set
+        aside when the disk is full; remove that room."""
+        report = self._describe(header_written=True)
+        self.header.update(self._final or {})
+        self.header["log"] = report.record()
+        text = _header_text(self.header)
+        try:
+            with self._busy():
+                try:
+                    write_atomically({header_path(self.path): text})
+                except OSError as error:
+                    if error.errno != errno.ENOSPC or not self._reserve.exists():
+                        raise
+                    self._reserve.unlink()
+                    write_atomically({header_path(self.path): text})
+        except OSError as error:
+            self._fail(f"cannot update {header_path(self.path).name}", error)
+            return self._describe(header_written=False)
+        finally:
+            self._reserve.unlink(missing_ok=True)
+        return report
+
+    def _set_aside(self, size: int) -> None:
+        """Make the reserve file of ``size`` bytes (zeros, its blocks allocated)."""
+        fd = os.open(self._reserve, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            os.posix_fallocate(fd, 0, size)
+        except OSError:
+            self._reserve.unlink(missing_ok=True)
+            raise
+        finally:
+            os.close(fd)
+
+    def _describe(self, header_written: bool) -> LogReport:
+        """What the log kept so far."""
+        return LogReport(
+            samples=self.samples,
+            samples_written=self._written_lines,
+            fault=self.fault,
+            header_written=header_written,
         )
+
+
+def _reason(error: OSError) -> str:
+    """An OSError's reason, without its file name: "No space left on device"."""
+    return error.strerror or str(error)
 
 
 MISSING_NAMED = 3

@@ -26,6 +26,12 @@ Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this or
    joint range, and move no faster than the actuators' Velocity Limit, at 100 % feed
    (the feed ceiling keeps them so above it).
 
+Once connected, before anything moves:
+
+6. **Room for the log.** The disk that takes the log must have room for twice what a run
+   of the plan at its starting feed (with its approach, settle, a stop and the hold)
+   logs at the loop's rate (:func:`check_log_room`).
+
 A CSV whose samples are not those its sidecar records never gets this far:
 :meth:`~spm_opt.trajectory.Trajectory.from_csv` refuses it.
 """
@@ -33,6 +39,8 @@ A CSV whose samples are not those its sidecar records never gets this far:
 from __future__ import annotations
 
 import logging
+import shutil
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -40,6 +48,7 @@ import numpy as np
 from spm_opt.errors import PreflightError
 from spm_opt.evaluate import evaluate
 from spm_opt.execution.feed import JointLimits
+from spm_opt.execution.log import bytes_needed
 from spm_opt.execution.tracking import Lead, led_goals_outside
 from spm_opt.limits import ROBOT, RULES
 from spm_opt.model.params import DEG
@@ -144,6 +153,25 @@ def check_at_rest(trajectory: Trajectory, limits: JointLimits, period_s: float) 
                 f"joins rest within one {period_s * 1e3:g} ms control period under "
                 f"{limits.acceleration:g} rad/s^2 and {limits.jerk:g} rad/s^3)"
             )
+
+
+LOG_ROOM_MARGIN = 2.0
+"""The log needs this many times its estimated size free on its disk."""
+
+
+def check_log_room(log_path: Path, seconds: float, header: dict[str, Any]) -> None:
+    """Refuse a run whose log, ``seconds`` long at ``header``'s control rate, would not fit
+    :data:`LOG_ROOM_MARGIN` times over in the free space of ``log_path``'s disk."""
+    rate_hz = header["settings"]["rate_hz"]
+    needed = LOG_ROOM_MARGIN * bytes_needed(seconds * rate_hz, header)
+    existing = next(folder for folder in log_path.absolute().parents if folder.exists())
+    free = shutil.disk_usage(existing).free
+    if free < needed:
+        raise PreflightError(
+            f"log {log_path}: a run of about {seconds:.1f} s at {rate_hz:g} Hz needs "
+            f"{needed / 1e6:.2f} MB free ({LOG_ROOM_MARGIN:g} times its estimate), and its "
+            f"disk has {free / 1e6:.2f} MB; free some space or log to another disk"
+        )
 
 
 def degrees(q: np.ndarray) -> str:

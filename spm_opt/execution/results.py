@@ -111,6 +111,50 @@ class RunStatus:
     status: str
 
 
+@dataclass(frozen=True)
+class LogReport:
+    """What the execution log kept.
+
+    Attributes
+    ----------
+    samples : int
+        Samples the run logged.
+    samples_written : int
+        Of those, the lines the CSV holds (whole lines, in order from the first).
+    fault : str or None
+        Why the log failed (a write that raised or stalled), or None.
+    header_written : bool
+        The header was replaced with the run's outcome.
+    """
+
+    samples: int
+    samples_written: int
+    fault: str | None
+    header_written: bool
+
+    @property
+    def samples_lost(self) -> int:
+        """Samples the CSV does not hold."""
+        return self.samples - self.samples_written
+
+    def record(self) -> dict[str, Any]:
+        """The header's ``log`` entry."""
+        return {
+            "samples": self.samples,
+            "samples_written": self.samples_written,
+            "samples_lost": self.samples_lost,
+            "fault": self.fault,
+        }
+
+    def summary(self) -> str:
+        """What the CSV and the header hold, in one phrase."""
+        header = "records" if self.header_written else "lacks"
+        return (
+            f"the log holds {self.samples_written} of {self.samples} samples (whole lines); "
+            f"its header {header} the outcome"
+        )
+
+
 @dataclass
 class ExecutionResult:
     """How a run ended. ``completed`` is False when it ended in a safe stop; ``reason``
@@ -118,7 +162,7 @@ class ExecutionResult:
     ``at_rest``: rest was proven at the end; ``stop`` says how the stop went; ``signals``
     lists every SIGINT and SIGTERM received, with the phase it arrived in; ``feed_events``
     every hold, resume and override, with its time (s, the log's clock) and plan time, as
-    the header has them."""
+    the header has them; ``log`` what the log kept (None for a run that logged nothing)."""
 
     completed: bool
     reason: str
@@ -130,6 +174,7 @@ class ExecutionResult:
     stop: StopReport | None = None
     signals: list[str] = field(default_factory=list)
     feed_events: list[dict[str, Any]] = field(default_factory=list)
+    log: LogReport | None = None
 
     @property
     def succeeded(self) -> bool:

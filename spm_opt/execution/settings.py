@@ -61,6 +61,9 @@ class ExecutionSettings:
         After a stop, longest time spent holding to confirm rest.
     flush_interval_s : float, s
         Longest time a sample waits before it is written to the log.
+    log_stall_s : float, s
+        A write to the log that has not returned after this long is a fault, as one that
+        failed is: the run stops safely (the stop never waits on the disk).
     feed : float
         The feed override the plan starts at, a fraction of its planned pace.
     max_feed : float
@@ -89,6 +92,7 @@ class ExecutionSettings:
     rest_position_pulses: int = 5
     hold_s: float = 1.0
     flush_interval_s: float = 0.1
+    log_stall_s: float = 1.0
     feed: float = 1.0
     max_feed: float = 1.5
     max_hold_s: float = 600.0
@@ -109,6 +113,7 @@ class ExecutionSettings:
             "rest_position_pulses": (1, 100_000),
             "hold_s": (0.0, 60.0),
             "flush_interval_s": (1e-3, 0.1),
+            "log_stall_s": (0.05, 60.0),
             "feed": (0.0, 4.0),
             "max_feed": (1.0, 4.0),
             "max_hold_s": (0.0, 86_400.0),
