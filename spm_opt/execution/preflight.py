@@ -33,10 +33,10 @@ A CSV whose samples are not those its sidecar records never gets this far:
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 import numpy as np
 
+from spm_opt import provenance
 from spm_opt.errors import PreflightError
 from spm_opt.evaluate import evaluate
 from spm_opt.execution.feed import JointLimits
@@ -47,8 +47,6 @@ from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
 
 _LOG = logging.getLogger(__name__)
-
-OTHER_PROBLEM_HINT = "plan it again for this problem, or allow it with --other-problem"
 
 
 def check_plan(
@@ -97,26 +95,17 @@ def check_plan(
 
 def check_made_for(problem: Problem, trajectory: Trajectory, other_problem: bool) -> str:
     """Refuse a plan whose metadata does not record ``problem``'s fingerprint, unless
-    ``other_problem``; returns why it was allowed all the same ("" if it is ``problem``'s)."""
-    recorded: Any = trajectory.metadata.get("problem")
-    fingerprint = recorded.get("fingerprint") if isinstance(recorded, dict) else None
-    if fingerprint == problem.fingerprint:
-        return ""
-    if fingerprint is None:
-        why = (
-            "the plan records no problem it was made for (a CSV without its sidecar, or "
-            "one written by hand or by an older spm-opt)"
-        )
-    else:
-        name = recorded.get("name") or "another problem"
-        why = (
-            f"the plan was made for {name} (fingerprint {str(fingerprint)[:12]}), not for "
-            f"{problem.name} ({problem.fingerprint[:12]}): their landmarks, limits or robot "
-            "differ"
-        )
-    if not other_problem:
-        raise PreflightError(f"plan refused: {why}; {OTHER_PROBLEM_HINT}")
-    return why
+    ``other_problem`` (:func:`spm_opt.provenance.check_made_for`); returns why it was
+    allowed all the same ("" if it is ``problem``'s)."""
+    return provenance.check_made_for(
+        problem,
+        trajectory.metadata,
+        "plan",
+        other_problem,
+        refused="plan refused",
+        hint=provenance.PLAN_HINT,
+        error=PreflightError,
+    )
 
 
 def rest_bounds(limits: JointLimits, period_s: float) -> tuple[float, float]:
