@@ -337,7 +337,7 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         type=float,
         default=1.0,
         metavar="F",
-        help="start at this fraction of the planned pace (default 1)",
+        help="start at this fraction of the planned pace, 0.1 to 4 (default 1)",
     )
     execute.add_argument(
         "--max-hold",

@@ -182,9 +182,10 @@ NOTES = {
     ("sweep", "name"): "The sweep's name.",
     ("sweep", "description"): "One line about the sweep; the summary's title.",
     ("sweep", "problem"): "The base problem file, relative to this file.",
-    ("sweep", "planners"): "A non-empty list of registered planner names.",
+    ("sweep", "planners"): "A non-empty list of registered planner names, each once.",
     ("sweep", "grid"): "Axes swept in every combination.",
-    ("sweep", "grid.KEY"): "A non-empty list of values, each once, of a problem key "
+    ("sweep", "grid.KEY"): "A non-empty list of values, each once (2 and 2.0 are one), of a "
+    "problem key "
     "(limits.max_tool_speed_mm_s, segment_durations_s) or robot.KEY of its robot file "
     "(robot.friction.mu); each value must load.",
     ("sweep", "random"): "Axes drawn at random (uniform), seeded.",
