@@ -181,8 +181,8 @@ def headline_rows(
     report: Report, scene: ReviewScene, skull: Skull | None = None
 ) -> list[tuple[str, str]]:
     """The figures the page's table shows, as (what, value with its unit): the report's,
-    and of a skull from imaging its registration's error and the landmarks' moves onto
-    it."""
+    and of a skull from imaging its registration's error, its largest fiducial residual
+    and the landmarks' moves onto it."""
     rows = [
         ("planner", report.planner or "(unknown)"),
         ("duration", f"{report.duration_s:.2f} s"),
@@ -201,6 +201,9 @@ def headline_rows(
         rows.append(("max depth acceleration", f"{report.max_depth_acceleration_mm_s2:.1f} mm/s²"))
     if skull is not None and skull.registration_rms_mm is not None:
         rows.append(("registration RMS error", f"{skull.registration_rms_mm:.3f} mm"))
+    if skull is not None and skull.fiducial_residuals_mm is not None:
+        largest = float(np.max(skull.fiducial_residuals_mm))
+        rows.append(("largest fiducial residual", f"{largest:.3f} mm"))
     if skull is not None and skull.landmark_shifts_mm is not None:
         moved = float(np.max(np.abs(skull.landmark_shifts_mm)))
         rows.append(("landmarks moved onto the mesh", f"≤ {moved:.3f} mm"))
