@@ -241,6 +241,7 @@ def test_the_comparison_names_the_skull_and_its_registration(tmp_path):
     summary = comparison_markdown(problem, [])
     assert f"outer mesh {len(problem.skull.outer_mesh.faces):,} triangles" in summary
     assert "image-to-robot registration: RMS error 0.000 mm" in summary
+    assert "(each fiducial's residual: 0.000, 0.000, 0.000, 0.000 mm)" in summary
 
 
 # --- what registration and the markups must be -----------------------------------------

@@ -4,9 +4,11 @@ Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this or
 
 1. **Made for this problem.** The plan's metadata records the problem it was planned for
    (:meth:`~spm_opt.problem.Problem.record`); its fingerprint (the landmarks, the limits
-   and the robot, not the file's bytes) must be this problem's. A plan that records none
-   (no sidecar, or one written by hand) or another runs only when asked for on purpose
-   (``other_problem``), and is then still judged by this problem's limits.
+   and the robot, not the file's bytes) must be this problem's
+   (:func:`spm_opt.provenance.check_made_for`, as ``review`` and ``evaluate`` check it).
+   A plan that records none (no sidecar, or one written by hand) or another runs only
+   when asked for on purpose (``other_problem``), and is then still judged by this
+   problem's limits.
 2. **At rest at both ends.** The executor joins the plan from rest and holds its last
    goal after it, so the plan's speed and acceleration at each end must be small enough
    that joining rest within one control period T keeps the limits every commanded motion
