@@ -142,6 +142,12 @@ def _parser() -> argparse.ArgumentParser:
         "(default: only the plan)",
     )
     review.add_argument(
+        "--other-problem",
+        action="store_true",
+        help="draw a plan or a log made for another problem (or recording none) under PROBLEM "
+        "(default: refused)",
+    )
+    review.add_argument(
         "--out",
         required=True,
         type=Path,
@@ -332,7 +338,7 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         type=float,
         default=1.0,
         metavar="F",
-        help="start at this fraction of the planned pace (default 1)",
+        help="start at this fraction of the planned pace, 0.1 to 4 (default 1)",
     )
     execute.add_argument(
         "--max-hold",
@@ -637,20 +643,20 @@ def _faults(name: str, report: Report) -> str:
 
 def _review(args: argparse.Namespace) -> None:
     from spm_opt.files import write_atomically
-    from spm_opt.input_limits import read_execution_log
     from spm_opt.problem import load_problem
-    from spm_opt.report.review import review_page
+    from spm_opt.report.review import review_inputs, review_page
     from spm_opt.report.review_png import review_png
     from spm_opt.skull.surface import Skull
-    from spm_opt.trajectory import Trajectory
 
     check_output_directory(args.out, "--out")
     problem = load_problem(args.problem)
-    trajectory = Trajectory.from_csv(args.plan)
-    log = None if args.log is None else read_execution_log(args.log)[0]
+    given = review_inputs(problem, args.plan, args.log, args.other_problem)
+    trajectory, log = given.trajectory, given.log
     skull = problem.skull if problem.skull is not None else Skull(surface=problem.surface)
     files = {
-        args.out / "review.html": review_page(problem, skull, trajectory, log),
+        args.out / "review.html": review_page(
+            problem, skull, trajectory, log, warnings=given.warnings
+        ),
         args.out / "review.png": review_png(problem, skull, trajectory, log),
     }
     write_atomically(files)

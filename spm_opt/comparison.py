@@ -225,7 +225,11 @@ def _skull_lines(problem: Problem) -> list[str]:
             f"{inner}; landmarks moved onto it by at most {moved:.3f} mm"
         )
     if skull.registration_rms_mm is not None:
-        lines.append(f"- image-to-robot registration: RMS error {skull.registration_rms_mm:.3f} mm")
+        line = f"- image-to-robot registration: RMS error {skull.registration_rms_mm:.3f} mm"
+        if skull.fiducial_residuals_mm is not None:
+            residuals = ", ".join(f"{r:.3f}" for r in skull.fiducial_residuals_mm)
+            line += f" (each fiducial's residual: {residuals} mm)"
+        lines.append(line)
     return lines
 
 

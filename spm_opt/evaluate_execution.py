@@ -76,6 +76,7 @@ from spm_opt.input_limits import (
 from spm_opt.limits import contour_tube, path_tolerance
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
+from spm_opt.provenance import check_made_for, log_hint
 
 ACCELERATION_SPAN_S = 0.04
 JERK_SPAN_S = 0.1
@@ -303,14 +304,10 @@ def _judge(
 
 def _read_run(path: Path, problem: Problem, other_problem: bool) -> _Run:
     """The log's judged rows, each checked; one-line :class:`InputError` on a bad log."""
-    table, header = read_execution_log(path)
-    if not header:
-        raise InputError(
-            f"log {path}: no header {header_path(path).name} beside it (spm-opt execute "
-            "writes the two together)"
-        )
-    _check_header(path, header)
-    _check_made_under(problem, header, other_problem, path)
+    table, header = read_log_checked(path)
+    check_made_for(
+        problem, header, "log", other_problem, refused=f"log {path} refused", hint=log_hint("judge")
+    )
     phase = table["phase"].astype(str).to_numpy()
     plan_rows = np.flatnonzero(phase == "plan")
     if plan_rows.size == 0:
@@ -351,6 +348,19 @@ def _read_run(path: Path, problem: Problem, other_problem: bool) -> _Run:
         skipped=int(np.sum(~read)),
         header=header,
     )
+
+
+def read_log_checked(path: Path) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """An execution log's table and its header, checked to be there and of the kind
+    ``spm-opt execute`` writes; one-line :class:`InputError` otherwise."""
+    table, header = read_execution_log(path)
+    if not header:
+        raise InputError(
+            f"log {path}: no header {header_path(path).name} beside it (spm-opt execute "
+            "writes the two together)"
+        )
+    _check_header(path, header)
+    return table, header
 
 
 def _check_header(path: Path, header: dict[str, Any]) -> None:
@@ -412,30 +422,6 @@ def _feed_in_force(feed: np.ndarray, in_plan: np.ndarray, period_s: float) -> np
     recent = pd.Series(np.where(in_plan, feed, np.nan)).rolling(width, min_periods=1).max()
     force = np.where(in_plan, recent.to_numpy(), np.nanmax(feed[in_plan]))
     return np.maximum(force, 1.0)
-
-
-def _check_made_under(
-    problem: Problem, header: dict[str, Any], other_problem: bool, path: Path
-) -> None:
-    """Refuse a log whose header does not record ``problem``'s fingerprint, unless
-    ``other_problem``."""
-    recorded = header.get("problem")
-    fingerprint = recorded.get("fingerprint") if isinstance(recorded, dict) else None
-    if fingerprint == problem.fingerprint or other_problem:
-        return
-    if fingerprint is None:
-        why = "its header records no problem it ran under"
-    else:
-        name = recorded.get("name") or "another problem"
-        why = (
-            f"it ran under {name} (fingerprint {str(fingerprint)[:12]}), not under "
-            f"{problem.name} ({problem.fingerprint[:12]}): their landmarks, limits or robot "
-            "differ"
-        )
-    raise InputError(
-        f"log {path} refused: {why}; judge it under the problem it ran under, or allow it "
-        "with --other-problem"
-    )
 
 
 def _trace_shaped(trace: dict[str, np.ndarray]) -> bool:

@@ -74,7 +74,9 @@ _EXCERPT_ITEMS = 4  # items shown of a long list, tuple or dict
 
 
 def excerpt(value: Any, width: int = EXCERPT_CHARS) -> str:
-    """A short ``repr`` of ``value`` for a message, at most ``width`` characters."""
+    """A short ``repr`` of ``value`` for a message, at most ``width`` characters; a
+    numpy scalar or array as the Python number or list it holds (``2.0``, not
+    ``np.float64(2.0)``)."""
     text = _short_repr(value, width)
     return text if len(text) <= width else text[: width - 3] + "..."
 
@@ -82,6 +84,10 @@ def excerpt(value: Any, width: int = EXCERPT_CHARS) -> str:
 def _short_repr(value: Any, width: int) -> str:
     """``repr(value)``, but of a long string only its start, and of a long list, tuple or
     dict its first items and its length: never the ``repr`` of what will not be shown."""
+    import numpy as np
+
+    if isinstance(value, np.generic | np.ndarray):
+        value = value.tolist()
     if isinstance(value, str):
         return repr(value[: width + 1])
     if isinstance(value, dict):

@@ -262,7 +262,8 @@ class Problem:
     def record(self) -> dict[str, Any]:
         """What a plan's metadata records of the problem it was made for: its name, its
         file and the file's SHA-256, its :attr:`fingerprint`, and of a skull from imaging
-        the fiducial registration error and how far each landmark moved onto the mesh."""
+        the fiducial registration error, each fiducial's residual and how far each
+        landmark moved onto the mesh."""
         record: dict[str, Any] = {
             "name": self.name,
             "file": None if self.source is None else str(self.source),
@@ -274,6 +275,9 @@ class Problem:
             record["skull"] = {
                 "mesh": skull.outer_mesh is not None,
                 "registration_rms_mm": skull.registration_rms_mm,
+                "fiducial_residuals_mm": None
+                if skull.fiducial_residuals_mm is None
+                else skull.fiducial_residuals_mm.tolist(),
                 "landmark_shifts_mm": None
                 if skull.landmark_shifts_mm is None
                 else dict(zip(self.landmark_names, skull.landmark_shifts_mm.tolist(), strict=True)),
@@ -416,7 +420,7 @@ def load_problem(path: str | Path, overrides: Mapping[str, Any] | None = None) -
     points = np.array(points)
     skull = None
     if skull_keys is not None:
-        skull, points = skull_on_mesh(skull_keys, tuple(names), points)
+        skull, points = skull_on_mesh(skull_keys, tuple(names), points, landmarks_file)
     limits_table = root.table("limits", required=False)
     limits = _limits(limits_table, robot)
     planners = root.table("planner", required=False)

@@ -224,7 +224,7 @@ class Trajectory:
         and the landmark times are divided by ``rate``.
         """
         if not (np.isfinite(rate) and rate > 0.0):
-            raise InputError(f"rate = {rate!r}: expected a positive number")
+            raise InputError(f"rate = {excerpt(rate)}: expected a positive number")
         breaks = self._q.x / rate
         if isinstance(self._q, BPoly):
             poly: PPoly | BPoly = BPoly(self._q.c, breaks)

@@ -598,7 +598,7 @@ def hardware_plan_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
     [
         pytest.param(["--rate", "nan"], ("--rate: rate_hz = nan", "[1.0, 2000.0]"), id="rate-nan"),
         pytest.param(["--rate", "0"], ("--rate: rate_hz = 0.0",), id="rate-zero"),
-        pytest.param(["--feed", "nan"], ("--feed: feed = nan", "[0.0, 4.0]"), id="feed-nan"),
+        pytest.param(["--feed", "nan"], ("--feed: feed = nan", "[0.1, 4.0]"), id="feed-nan"),
         pytest.param(["--feed", "-0.5"], ("--feed: feed = -0.5",), id="feed-negative"),
         pytest.param(
             ["--max-hold", "-1"], ("--max-hold: max_hold_s = -1.0",), id="max-hold-negative"

@@ -25,11 +25,13 @@ from scipy.spatial import cKDTree
 from test_execution_faults import LOG_DIGITS_ERROR, derivative_estimates
 
 import spm_opt as so
+from spm_opt.cli import main
 from spm_opt.errors import InputError
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
 from spm_opt.execution.dynamixel import DynamixelRobot
 from spm_opt.execution.emulator import spawn_emulator
 from spm_opt.execution.feed import (
+    FEED_STEP,
     MAX_FEED_JERK_PER_S2,
     FeedProfile,
     FeedRequests,
@@ -376,3 +378,28 @@ def test_operator_requests_are_checked_and_clipped():
 def test_bad_feed_settings_are_one_line_errors(settings, field):
     with pytest.raises(InputError, match=f"^{field} = "):
         ExecutionSettings(**settings)
+
+
+@pytest.mark.parametrize(
+    "feed, shown", [(0, "0"), (0.0, "0.0"), (0.05, "0.05"), (np.float64(0.0), "0.0")]
+)
+def test_a_run_cannot_start_held(feed, shown):
+    """A start at feed 0 only waits max_hold_s, then stops: the feed starts at FEED_STEP or
+    more, and the message prints the value as a plain number."""
+    with pytest.raises(InputError) as refused:
+        ExecutionSettings(feed=feed)
+    assert str(refused.value) == f"feed = {shown}: expected a number in [0.1, 4.0]"
+    assert ExecutionSettings(feed=FEED_STEP).feed == FEED_STEP
+
+
+def test_execute_refuses_feed_0_in_one_line_and_writes_nothing(tmp_path, capsys):
+    plan = tmp_path / "plan.csv"
+    assert main(["plan", str(HARDWARE_PROBLEM), "--planner", "cubic", "--out", str(plan)]) == 0
+    capsys.readouterr()
+    log = tmp_path / "run.csv"
+    argv = ["execute", str(plan), "--problem", str(HARDWARE_PROBLEM), "--backend", "sim"]
+    status = main([*argv, "--log", str(log), "--feed", "0"])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err == "spm-opt: error: --feed: feed = 0.0: expected a number in [0.1, 4.0]\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plan.csv", "plan.json"]

@@ -3,6 +3,7 @@ joint angles (robot_geometry) and the ``spm-opt review`` command."""
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -13,15 +14,17 @@ import numpy as np
 import pandas as pd
 import pytest
 import trimesh
-from conftest import PAPER_PROBLEM
+from conftest import HARDWARE_PROBLEM, PAPER_PROBLEM
 from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
 from spm_opt.evaluate import evaluate
-from spm_opt.execution.log import COLUMNS
+from spm_opt.evaluate_execution import read_log_checked
+from spm_opt.execution.log import COLUMNS, header_path
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.report.review import BACKGROUND, review_page
+from spm_opt.provenance import check_run_of
+from spm_opt.report.review import BACKGROUND, review_inputs, review_page
 from spm_opt.report.review_png import review_png
 from spm_opt.report.review_scene import (
     MAX_SKULL_FACES,
@@ -174,6 +177,24 @@ def _plan_file(trajectory: so.Trajectory, folder: Path) -> Path:
     return path
 
 
+def _log_file(plan: Path, folder: Path, problem: so.Problem, header: dict | None = None) -> Path:
+    """A log of the plan at ``plan`` (its CSV) run under ``problem``, with the header
+    execute writes (the plan's metadata, its duration, the problem's record), updated by
+    ``header``."""
+    trajectory = so.Trajectory.from_csv(plan)
+    log = folder / "run.csv"
+    pd.DataFrame(_log_table(trajectory)).to_csv(log, index=False)
+    written = {
+        "plan": trajectory.metadata,
+        "plan_duration_s": trajectory.duration,
+        "problem": problem.record(),
+        "settings": {"rate_hz": 100.0},
+        **(header or {}),
+    }
+    header_path(log).write_text(json.dumps(written), encoding="utf-8")
+    return log
+
+
 def test_the_command_writes_the_page_and_the_png(
     paper_problem: so.Problem,
     baseline: so.Trajectory,
@@ -181,8 +202,7 @@ def test_the_command_writes_the_page_and_the_png(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     plan = _plan_file(baseline, tmp_path)
-    log = tmp_path / "run.csv"
-    pd.DataFrame(_log_table(baseline)).to_csv(log, index=False)
+    log = _log_file(plan, tmp_path, paper_problem)
     out = tmp_path / "review"
     status, shown = run_cli(
         ["review", str(PAPER_PROBLEM), str(plan), "--log", str(log), "--out", str(out)]
@@ -219,6 +239,116 @@ def test_the_command_refuses_bad_input_and_writes_nothing(
     status, shown = run_cli(argv)
     assert_one_error(status, capsys.readouterr().err, expected, tmp_path, shown)
     assert sorted(tmp_path.rglob("*")) == before  # nothing written
+
+
+def _refusals(
+    paper: so.Problem, hardware: so.Problem, folder: Path
+) -> dict[str, tuple[list[str], str]]:
+    """Per case, the review's arguments and the one line it must print: a plan or a log
+    made for another problem, a log of another plan, a log without its header."""
+    plan = _plan_file(so.plan(paper, "cubic"), folder)
+    other_plan = folder / "other.csv"
+    so.Trajectory.from_csv(plan).to_csv(other_plan, rate_hz=50.0)  # the same cut, resampled
+    ran = so.Trajectory.from_csv(other_plan)
+    paper_id, hardware_id = paper.fingerprint[:12], hardware.fingerprint[:12]
+    cases = {}
+    log = _log_file(plan, folder / "hardware", hardware)
+    cases["log of another problem"] = (
+        [str(PAPER_PROBLEM), str(plan), "--log", str(log)],
+        f"log {log} refused: it ran under craniotomy_hardware (fingerprint {hardware_id}), "
+        f"not under craniotomy_bone_flap ({paper_id}): their landmarks, limits or robot "
+        "differ; review it under the problem it ran under, or allow it with --other-problem",
+    )
+    log = _log_file(other_plan, folder / "other", paper)
+    cases["log of another plan"] = (
+        [str(PAPER_PROBLEM), str(plan), "--log", str(log), "--other-problem"],
+        f"log {log} refused: it is a run of another plan than {plan} (a cubic plan whose "
+        f"CSV's SHA-256 is {ran.metadata['samples']['sha256'][:12]}, not "
+        f"{so.Trajectory.from_csv(plan).metadata['samples']['sha256'][:12]}); give the plan "
+        "it ran",
+    )
+    cases["plan of another problem"] = (
+        [str(HARDWARE_PROBLEM), str(plan)],
+        f"plan {plan} refused: the plan was made for craniotomy_bone_flap (fingerprint "
+        f"{paper_id}), not for craniotomy_hardware ({hardware_id}): their landmarks, limits "
+        "or robot differ; plan it again for this problem, or allow it with --other-problem",
+    )
+    log = _log_file(plan, folder / "headless", paper)
+    header_path(log).unlink()
+    cases["log without its header"] = (
+        [str(PAPER_PROBLEM), str(plan), "--log", str(log), "--other-problem"],
+        f"log {log}: no header run.json beside it (spm-opt execute writes the two together)",
+    )
+    return cases
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        "log of another problem",
+        "log of another plan",
+        "plan of another problem",
+        "log without its header",
+    ],
+)
+def test_the_command_refuses_what_was_made_for_another_problem_or_plan(
+    case: str,
+    paper_problem: so.Problem,
+    hardware_problem: so.Problem,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """As evaluate and execute refuse them: one line naming the file and what it was
+    made for, exit status 2, nothing written (--other-problem lets through only what
+    another problem made)."""
+    for folder in ("hardware", "other", "headless"):
+        (tmp_path / folder).mkdir()
+    argv, line = _refusals(paper_problem, hardware_problem, tmp_path)[case]
+    out = tmp_path / "review"
+    before = sorted(tmp_path.rglob("*"))
+    status, shown = run_cli(["review", *argv, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert_one_error(status, err, (), tmp_path, shown)
+    assert err.strip() == f"spm-opt: error: {line}"
+    assert sorted(tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_a_plan_of_another_problem_is_drawn_on_request_with_a_warning(
+    baseline: so.Trajectory, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plan = _plan_file(baseline, tmp_path)
+    out = tmp_path / "review"
+    argv = ["review", str(HARDWARE_PROBLEM), str(plan), "--out", str(out), "--other-problem"]
+    status, shown = run_cli(argv)
+    err = capsys.readouterr().err
+    assert status == 0 and not shown, err
+    warning = f"plan {plan}: the plan was made for craniotomy_bone_flap (fingerprint "
+    assert err.startswith(f"spm-opt: warning: {warning}") and len(err.splitlines()) == 1
+    page = (out / "review.html").read_text(encoding="utf-8")
+    assert f'<p class="warning">Warning: {warning}' in page
+    assert "reviewed under craniotomy_hardware's limits.</p>" in page
+
+
+def test_a_run_on_the_simulated_robot_is_reviewed_with_its_plan_only(
+    hardware_problem: so.Problem, hardware_plan: so.Trajectory, tmp_path: Path
+) -> None:
+    """The header execute writes tells its plan: by its CSV's hash, else by its duration."""
+    plan = tmp_path / "plan.csv"
+    hardware_plan.to_csv(plan)
+    read = so.Trajectory.from_csv(plan)
+    backend = so.SimulatedRobot(hardware_problem.robot, start_rad=read.position(0.0))
+    assert so.execute(read, backend, hardware_problem, tmp_path / "run.csv").completed
+    given = review_inputs(hardware_problem, plan, tmp_path / "run.csv")
+    assert given.warnings == () and len(given.log) > 1000
+    _, header = read_log_checked(tmp_path / "run.csv")
+    check_run_of(read, str(plan), header, "run.csv")
+    unhashed = {**header, "plan": {"planner": "cubic"}}
+    check_run_of(read, str(plan), unhashed, "run.csv")  # the same duration
+    t, q, qd, qdd = read.samples()
+    slower = 1.03125  # 16.5 s
+    longer = so.Trajectory.from_samples(t * slower, q, qd / slower, qdd / slower**2)
+    with pytest.raises(so.InputError, match=r"a cubic plan of 16 s, not 16\.5 s"):
+        check_run_of(longer, "longer.csv", unhashed, "run.csv")
 
 
 @pytest.mark.slow

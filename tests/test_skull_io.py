@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -17,7 +18,14 @@ from scipy.spatial.transform import Rotation
 from spm_opt.errors import InputError
 from spm_opt.skull.frames import FRAMES, check_frame, frame_matrix, to_ras
 from spm_opt.skull.markups import MAX_MARKUPS_BYTES, SCHEMA, read_markups, write_markups
-from spm_opt.skull.registration import apply, check_transform, fit_rigid
+from spm_opt.skull.registration import (
+    MAX_FIDUCIAL_CONDITION,
+    apply,
+    check_residuals,
+    check_transform,
+    fiducial_condition,
+    fit_rigid,
+)
 
 COORDINATES = st.floats(-500.0, 500.0, allow_nan=False)
 
@@ -270,10 +278,20 @@ def _rigid(seed: int, translation: np.ndarray) -> np.ndarray:
     return matrix
 
 
-def _not_collinear(points: np.ndarray) -> bool:
-    """Whether the points span a plane well (the fit's rotation is well conditioned)."""
+def _condition(points: np.ndarray) -> float:
+    """The fiducials' condition number, from the eigenvalues of their scatter matrix: the
+    square root of the largest over the second largest."""
     centred = points - points.mean(axis=0)
-    return np.linalg.svd(centred, compute_uv=False)[1] > 1.0
+    eigenvalues = np.sort(np.linalg.eigvalsh(centred.T @ centred))[::-1]
+    return float(np.sqrt(eigenvalues[0] / eigenvalues[1])) if eigenvalues[1] > 0 else np.inf
+
+
+def _not_collinear(points: np.ndarray) -> bool:
+    """Whether the points span a plane well: their condition number at most half the bound,
+    and a second singular value above 1 mm."""
+    centred = points - points.mean(axis=0)
+    spread = np.linalg.svd(centred, compute_uv=False)[1] > 1.0
+    return spread and _condition(points) <= MAX_FIDUCIAL_CONDITION / 2
 
 
 FIDUCIALS = st.integers(3, 10).flatmap(
@@ -329,7 +347,7 @@ BAD_FIDUCIALS = {
     "collinear": (
         np.array([[0.0, 0, 0], [10, 10, 10], [20, 20, 20 + 1e-7], [-5, -5, -5]]),
         TRIANGLE[[0, 1, 2, 0]],
-        ("4 image fiducials lie on one line", "undetermined"),
+        ("4 image fiducials are degenerate: they lie near one line", "undetermined"),
     ),
     "collinear robot": (TRIANGLE, np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), ("robot",)),
     "NaN": (np.array([[0.0, 0, 0], [1, np.nan, 0], [0, 1, 0]]), TRIANGLE, ("nan", "finite")),
@@ -344,6 +362,87 @@ def test_bad_fiducials_get_one_line_naming_the_field(case):
     with pytest.raises(InputError) as error:
         fit_rigid(image, robot, "skull.registration.image_fiducials_mm")
     assert _one_line(error, *parts).startswith("skull.registration.image_fiducials_mm: ")
+
+
+WELL_SPREAD = (
+    st.integers(3, 8)
+    .flatmap(lambda n: arrays(float, (n, 3), elements=st.floats(-120.0, 120.0, allow_nan=False)))
+    .filter(_not_collinear)
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    image=WELL_SPREAD,
+    seed=st.integers(0, 2**32 - 1),
+    translation=TRANSLATIONS,
+    wrong=st.integers(0, 7),
+    error=arrays(float, 3, elements=st.floats(-25.0, 25.0, allow_nan=False)),
+)
+def test_a_fit_with_a_residual_above_the_bound_names_the_fiducial(
+    image, seed, translation, wrong, error
+):
+    """One fiducial located wrongly by up to 25 mm in each axis: each residual is the one
+    trimesh's own rigid fit gives, and the fit is refused exactly when the largest exceeds
+    the bound, naming that fiducial (1-based) and every residual."""
+    robot = apply(_rigid(seed, translation), image)
+    robot[wrong % len(image)] += error
+    fit = fit_rigid(image, robot, "image_fiducials_mm")
+    matrix, _, _ = trimesh.registration.procrustes(image, robot, reflection=False, scale=False)
+    residuals = np.linalg.norm(image @ matrix[:3, :3].T + matrix[:3, 3] - robot, axis=1)
+    np.testing.assert_allclose(fit.residuals_mm, residuals, atol=1e-6)
+    bound = 2.0
+    assume(abs(residuals.max() - bound) > 1e-6)
+    if residuals.max() < bound:
+        check_residuals(fit, bound, "max_fiducial_residual_mm")
+        return
+    with pytest.raises(InputError) as refused:
+        check_residuals(fit, bound, "max_fiducial_residual_mm")
+    worst = int(np.argmax(fit.residuals_mm))
+    each = ", ".join(f"{r:.2f}" for r in fit.residuals_mm)
+    assert str(refused.value) == (
+        f"max_fiducial_residual_mm = 2: fiducial {worst + 1} of {len(image)} has the largest "
+        f"residual, {fit.residuals_mm[worst]:.2f} mm (each: {each} mm; RMS {fit.rms_mm:.2f} "
+        "mm); expected at most 2 mm: check where the fiducials were located in both frames "
+        "(the fit spreads one's error over others)"
+    )
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(3, 8),
+    seed=st.integers(0, 2**32 - 1),
+    translation=TRANSLATIONS,
+    off=st.floats(0.0, 0.001),
+    length=st.floats(20.0, 300.0),
+)
+def test_fiducials_near_one_line_are_named_degenerate(n, seed, translation, off, length):
+    """Fiducials along a line 20 to 300 mm long, each at most 0.001 mm off it, in any
+    frame: refused at registration as degenerate, by their condition number, in the image
+    or in the robot's frame."""
+    rng = np.random.default_rng(seed)
+    direction = Rotation.random(random_state=seed).apply([1.0, 0.0, 0.0])
+    along = np.linspace(-length / 2, length / 2, n)
+    line = np.outer(along, direction) + rng.uniform(-1.0, 1.0, (n, 3)) * off / np.sqrt(3)
+    line = apply(_rigid(seed, translation), line)
+    angles = 2 * np.pi * np.arange(n) / n
+    circle = 50.0 * np.column_stack([np.cos(angles), np.sin(angles), np.zeros(n)])
+    assert _condition(line) > MAX_FIDUCIAL_CONDITION >= _condition(circle)
+    for image, robot, kind in ((line, circle, "image"), (circle, line, "robot")):
+        with pytest.raises(InputError) as refused:
+            fit_rigid(image, robot, "fiducials")
+        _one_line(
+            refused,
+            f"fiducials: the {n} {kind} fiducials are degenerate: they lie near one line "
+            "(condition number ",
+            f"at most {MAX_FIDUCIAL_CONDITION:g}), which leaves the rotation about it undetermined",
+        )
+
+
+@settings(max_examples=40, deadline=None)
+@given(image=WELL_SPREAD)
+def test_the_condition_number_is_that_of_the_scatter_matrix(image):
+    assert fiducial_condition(image) == pytest.approx(_condition(image), rel=1e-9)
 
 
 def _matrix(upper: np.ndarray, last_row=(0.0, 0.0, 0.0, 1.0)) -> list:

@@ -8,16 +8,24 @@ from __future__ import annotations
 import subprocess
 import sys
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
+import hypothesis
 import numpy as np
 import pytest
+import tomli_w
 import trimesh
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from plan_checks import Radius, assert_within_limits
+from test_bad_inputs import assert_nothing_written, assert_one_error, run_cli
 
 import spm_opt as so
 from spm_opt.model import kinematics
 from spm_opt.skull.example_problem import write_example_problem
+from spm_opt.skull.markups import read_markups, write_markups
+from spm_opt.skull.registration import apply
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = str(ROOT / "problems" / "robots" / "prototype.toml")
@@ -233,3 +241,146 @@ def test_the_comparison_names_the_skull_and_its_registration(tmp_path):
     summary = comparison_markdown(problem, [])
     assert f"outer mesh {len(problem.skull.outer_mesh.faces):,} triangles" in summary
     assert "image-to-robot registration: RMS error 0.000 mm" in summary
+    assert "(each fiducial's residual: 0.000, 0.000, 0.000, 0.000 mm)" in summary
+
+
+# --- what registration and the markups must be -----------------------------------------
+
+
+def plan_refused(path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    """``spm-opt plan`` of the problem at ``path``, in this process: exit status 2, one
+    line, no plan written; returns the line after ``spm-opt: error: ``."""
+    out = tmp_path / "out" / "plan.csv"
+    status, shown = run_cli(["plan", str(path), "--planner", "cubic", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert_one_error(status, err, (), tmp_path, shown)
+    assert_nothing_written(out, tmp_path)
+    return err.strip().removeprefix("spm-opt: error: ")
+
+
+def rewrite(path: Path, edit: Callable[[dict], None]) -> None:
+    """Edit the problem file at ``path`` as TOML."""
+    data = tomllib.loads(path.read_text())
+    edit(data)
+    path.write_text(tomli_w.dumps(data))
+
+
+@pytest.fixture(scope="module")
+def markups_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("markups")
+
+
+@settings(max_examples=12, deadline=None)
+@given(point=st.integers(0, 4), factor=st.floats(0.85, 5.0))
+@hypothesis.example(point=0, factor=1.02)  # within the bound
+@hypothesis.example(point=3, factor=0.97)
+@hypothesis.example(point=2, factor=5.0)  # five times farther out than the skull
+@hypothesis.example(point=1, factor=0.9)  # inside
+def test_a_markups_point_far_from_the_mesh_is_refused_naming_it(markups_folder, point, factor):
+    """One markups point moved along its direction from the isocenter (to between 0.85 and
+    5 times its distance): refused exactly when it lies more than max_landmark_shift_mm
+    (5 mm) from the outer mesh along that direction, as trimesh's ray cast measures it."""
+    folder = markups_folder / f"{point}_{factor:.6f}"
+    path = example(folder, subdivisions=3)
+    matrix = np.array(tomllib.loads(path.read_text())["skull"]["image_to_robot"])
+    markups = read_markups(folder / "flap.mrk.json")
+    robot_mm = apply(matrix, markups.points_ras_mm)
+    robot_mm[point] *= factor
+    image_mm = apply(np.linalg.inv(matrix), robot_mm)
+    write_markups(folder / "flap.mrk.json", markups.labels, image_mm, "RAS", markups.closed)
+    direction = robot_mm[point] / np.linalg.norm(robot_mm[point])
+    on_mesh = ray_cast(meshes_in_robot_frame(path), direction[None])[0] / 1e-3
+    shift = np.linalg.norm(on_mesh) - np.linalg.norm(robot_mm[point])  # mm, + inwards
+    assume(abs(abs(shift) - 5.0) > 1e-6 and abs((abs(shift) * 10) % 1 - 0.5) > 1e-6)
+    if abs(shift) < 5.0:
+        recorded = so.load_problem(path).record()["skull"]["landmark_shifts_mm"]
+        assert recorded[markups.labels[point]] == pytest.approx(shift, abs=1e-6)
+        return
+    with pytest.raises(so.InputError) as refused:
+        so.load_problem(path)
+    side = "outside" if shift < 0 else "inside"
+    assert str(refused.value) == (
+        f"{path}: skull.max_landmark_shift_mm = 5: landmark {markups.labels[point]} of "
+        f"flap.mrk.json lies {abs(shift):.1f} mm {side} the outer surface along its direction "
+        "from the isocenter; expected at most 5 mm (a point of this skull, in its frame and "
+        "units?)"
+    )
+
+
+def test_the_markups_bound_is_a_setting_and_refusing_writes_nothing(tmp_path, capsys):
+    path = example(tmp_path, subdivisions=3)
+    matrix = np.array(tomllib.loads(path.read_text())["skull"]["image_to_robot"])
+    markups = read_markups(tmp_path / "flap.mrk.json")
+    robot_mm = apply(matrix, markups.points_ras_mm)
+    robot_mm[2] *= 5.0  # five times farther out than the skull
+    image_mm = apply(np.linalg.inv(matrix), robot_mm)
+    write_markups(tmp_path / "flap.mrk.json", markups.labels, image_mm, "RAS", markups.closed)
+    line = plan_refused(path, tmp_path, capsys)
+    assert line.startswith(f"{path}: skull.max_landmark_shift_mm = 5: landmark F-3 of ")
+    rewrite(path, lambda data: data["skull"].update(max_landmark_shift_mm=1000.0))
+    shifts = so.load_problem(path).record()["skull"]["landmark_shifts_mm"]
+    assert shifts["F-3"] < -250.0
+
+
+def _fiducials(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    registration = tomllib.loads(path.read_text())["skull"]["registration"]
+    return (
+        np.array(registration["image_fiducials_mm"]),
+        np.array(registration["robot_fiducials_mm"]),
+    )
+
+
+def test_a_fiducial_20_mm_wrong_is_refused_naming_it_and_every_residual(tmp_path, capsys):
+    path = example(tmp_path, subdivisions=3, registration=True)
+    image, robot = _fiducials(path)
+    robot[1, 0] += 20.0
+
+    def wrong(data: dict) -> None:
+        data["skull"]["registration"]["robot_fiducials_mm"] = robot.tolist()
+
+    rewrite(path, wrong)
+    matrix, _, _ = trimesh.registration.procrustes(image, robot, reflection=False, scale=False)
+    residuals = np.linalg.norm(image @ matrix[:3, :3].T + matrix[:3, 3] - robot, axis=1)
+    worst = int(np.argmax(residuals))
+    each = ", ".join(f"{r:.2f}" for r in residuals)
+    rms = np.sqrt(np.mean(residuals**2))
+    assert plan_refused(path, tmp_path, capsys) == (
+        f"{path}: skull.registration.max_fiducial_residual_mm = 2: fiducial {worst + 1} of 4 "
+        f"has the largest residual, {residuals[worst]:.2f} mm (each: {each} mm; RMS {rms:.2f} "
+        "mm); expected at most 2 mm: check where the fiducials were located in both frames "
+        "(the fit spreads one's error over others)"
+    )
+    rewrite(path, lambda data: data["skull"]["registration"].update(max_fiducial_residual_mm=20))
+    record = so.load_problem(path).record()["skull"]
+    np.testing.assert_allclose(record["fiducial_residuals_mm"], residuals, atol=1e-9)
+    assert record["registration_rms_mm"] == pytest.approx(rms, abs=1e-9)
+
+
+def test_near_collinear_fiducials_are_named_at_registration(tmp_path, capsys):
+    """0.001 mm off one line, located to 0.05 mm: named degenerate, not left to fail later
+    as an isocenter outside the skull."""
+    path = example(tmp_path, subdivisions=3, registration=True)
+    image, robot = _fiducials(path)
+    matrix, _, _ = trimesh.registration.procrustes(image, robot, reflection=False, scale=False)
+    start, step = image[0], image[1] - image[0]
+    line = np.array([start, start + step, start + 2 * step, start - step])
+    across = np.cross(step, [0.0, 0.0, 1.0])
+    line[3] += 0.001 * across / np.linalg.norm(across)
+    noise = np.random.default_rng(1).normal(scale=0.05, size=line.shape)
+    located = line @ matrix[:3, :3].T + matrix[:3, 3] + noise
+
+    def collinear(data: dict) -> None:
+        registration = data["skull"]["registration"]
+        registration["image_fiducials_mm"] = line.tolist()
+        registration["robot_fiducials_mm"] = located.tolist()
+
+    rewrite(path, collinear)
+    centred = line - line.mean(axis=0)
+    singular = np.sqrt(np.sort(np.linalg.eigvalsh(centred.T @ centred))[::-1])
+    assert plan_refused(path, tmp_path, capsys) == (
+        f"{path}: skull.registration.image_fiducials_mm: the 4 image fiducials are "
+        f"degenerate: they lie near one line (condition number {singular[0] / singular[1]:.3g}, "
+        "their spread along it over their spread across it; at most 10), which leaves the "
+        "rotation about it undetermined: expected at least 3 points spread well away from one "
+        "line"
+    )

@@ -9,10 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
+from spm_opt.fields import Table
 from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.sweep.spec import _grid, load_sweep_spec
 from spm_opt.sweep.task import ProblemFiles, _anchor_plan, code_identity, run_task
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -329,6 +331,65 @@ def test_bad_specs_are_one_line_errors(tmp_path, edit, expected):
         load_sweep_spec(write(tmp_path, GOOD.replace(old, new, 1)))
     message = str(caught.value)
     assert expected in message and "\n" not in message
+
+
+ONE_AXIS = f'''
+name = "repeats"
+problem = "{PROBLEM}"
+planners = ["cubic"]
+'''
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (
+            ("", '[grid]\n"limits.max_tool_speed_mm_s" = [2, 2.0]\n'),
+            "grid.limits.max_tool_speed_mm_s = [2, 2.0]: expected each value once (2 and 2.0 "
+            "are one value)",
+        ),
+        (
+            ("", '[grid]\n"limits.max_tool_speed_mm_s" = [3.0, -0.0, 0]\n'),
+            "grid.limits.max_tool_speed_mm_s = [3.0, -0.0, 0]: expected each value once (-0.0 "
+            "and 0 are one value)",
+        ),
+        (
+            ("", '[grid]\n"limits.max_tool_speed_mm_s" = [2, 2]\n'),
+            "grid.limits.max_tool_speed_mm_s = [2, 2]: expected each value once (2 twice)",
+        ),
+        (
+            ('planners = ["cubic"]', 'planners = ["cubic", "toppra", "cubic"]'),
+            "planners = ['cubic', 'toppra', 'cubic']: expected each planner once (cubic twice)",
+        ),
+        (
+            ("", '[random]\nsamples = 2\n[random.ranges]\n"limits.max_tool_speed_mm_s" = [4, 2]\n'),
+            "random.ranges.limits.max_tool_speed_mm_s = [4.0, 2.0]: expected [low, high] with "
+            "low < high",
+        ),
+    ],
+    ids=["equal-numbers", "signed-zero", "same-number", "planner-twice", "plain-numbers"],
+)
+def test_repeats_and_numbers_in_messages_are_one_plain_line(tmp_path, capsys, edit, expected):
+    """A grid value or a planner given twice (2 and 2.0 alike: one problem) is refused
+    naming its field, and a message shows numbers as the file wrote them (4.0, not
+    np.float64(4.0)): exit status 2, nothing written."""
+    old, new = edit
+    spec = write(tmp_path, ONE_AXIS.replace(old, new, 1) if old else ONE_AXIS + new)
+    out = tmp_path / "out"
+    status, shown = run_cli(["sweep", str(spec), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert_one_error(status, err, (), tmp_path, shown)
+    assert err == f"spm-opt: error: {spec}: {expected}\n"
+    assert not out.exists()
+
+
+def test_equal_grid_values_of_every_kind_are_found():
+    """Numbers by value, lists item by item, tables key by key; true is not 1, "2" not 2."""
+    for values in ([1, 1.0], [[1, 2], [1.0, 2.0]], [{"a": 1}, {"a": 1.0}], [True, True]):
+        with pytest.raises(so.InputError, match="expected each value once"):
+            _grid(Table({"k": values}, "spec"))
+    for values in ([True, 1], ["2", 2], [[1, 2], [2, 1]], [0.1, 0.1 + 1e-12]):
+        assert _grid(Table({"k": values}, "spec")) == {"k": values}
 
 
 def test_a_warm_started_row_does_not_depend_on_what_ran_before(tmp_path):

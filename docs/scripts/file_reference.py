@@ -140,13 +140,22 @@ NOTES = {
     "coordinates to the robot's frame, mm (a mesh in LPS is turned to RAS first).",
     ("problem", "skull.depth_margin_mm"): "The tool tip's depth setpoint lies this far outside "
     "the inner surface (negative: past it).",
+    ("problem", "skull.max_landmark_shift_mm"): "The farthest a landmark may be moved along "
+    "its direction from the isocenter onto the outer mesh; a landmark farther from the mesh "
+    "(placed on the scalp, in another frame or unit, on another skull) is refused, named. "
+    "Points placed on the bone in the image lie within a voxel or two of its mesh.",
     ("problem", "skull.registration"): "Instead of image_to_robot: fiducials in both frames, "
-    "fitted by a rigid least-squares registration; its RMS error goes into the plan's "
-    "metadata.",
-    ("problem", "skull.registration.image_fiducials_mm"): "At least 3 points, not on one line, "
-    "in `frame`.",
+    "fitted by a rigid least-squares registration; its RMS error and each fiducial's "
+    "residual go into the plan's metadata.",
+    ("problem", "skull.registration.image_fiducials_mm"): "At least 3 points, not near one "
+    "line (condition number, their spread along their line over their spread across it, at "
+    "most 10), in `frame`.",
     ("problem", "skull.registration.robot_fiducials_mm"): "The same points in the robot's "
     "frame, in the same order.",
+    ("problem", "skull.registration.max_fiducial_residual_mm"): "The largest residual allowed: "
+    "the distance between a robot fiducial and its image fiducial once the fit is applied. A "
+    "larger one (a fiducial located wrongly in one frame) refuses the fit, naming the "
+    "fiducial and every residual.",
     ("problem", "planner"): "Settings of the planners, one table each.",
     ("problem", "planner.NAME"): "The settings of the planner NAME: see Planner settings.",
     ("robot", "name"): "The robot's name.",
@@ -182,9 +191,10 @@ NOTES = {
     ("sweep", "name"): "The sweep's name.",
     ("sweep", "description"): "One line about the sweep; the summary's title.",
     ("sweep", "problem"): "The base problem file, relative to this file.",
-    ("sweep", "planners"): "A non-empty list of registered planner names.",
+    ("sweep", "planners"): "A non-empty list of registered planner names, each once.",
     ("sweep", "grid"): "Axes swept in every combination.",
-    ("sweep", "grid.KEY"): "A non-empty list of values, each once, of a problem key "
+    ("sweep", "grid.KEY"): "A non-empty list of values, each once (2 and 2.0 are one), of a "
+    "problem key "
     "(limits.max_tool_speed_mm_s, segment_durations_s) or robot.KEY of its robot file "
     "(robot.friction.mu); each value must load.",
     ("sweep", "random"): "Axes drawn at random (uniform), seeded.",
@@ -262,7 +272,8 @@ LOADERS: dict[str, Callable[[Path], Any]] = {
 
 def other_paths(folder: Path) -> dict[str, list[Path]]:
     """Files, written in ``folder``, that take the loaders' paths no shipped file takes: a
-    sweep with ``[random]`` and a robot without a current map."""
+    sweep with ``[random]``, a robot without a current map, and a problem whose skull's
+    transform is fitted to fiducials."""
     sweep = folder / "random_axes.toml"
     sweep.write_text(RANDOM_SWEEP.format(problem=PAPER_PROBLEM.as_posix()), encoding="utf-8")
     robot = tomllib.loads(PROTOTYPE.read_text(encoding="utf-8"))
@@ -270,7 +281,16 @@ def other_paths(folder: Path) -> dict[str, list[Path]]:
         del robot["actuator"][key]
     datasheet_map = folder / "datasheet_map.toml"
     datasheet_map.write_text(tomli_w.dumps(robot), encoding="utf-8")
-    return {"robot": [datasheet_map], "sweep": [sweep]}
+    problem = tomllib.loads(PAPER_PROBLEM.read_text(encoding="utf-8"))
+    problem["robot"] = PROTOTYPE.as_posix()
+    fiducials = [[0.0, 0.0, 0.0], [50.0, 0.0, 0.0], [0.0, 40.0, 0.0], [0.0, 0.0, 30.0]]
+    problem["skull"] = {
+        "frame": "RAS",
+        "registration": {"image_fiducials_mm": fiducials, "robot_fiducials_mm": fiducials},
+    }
+    registered = folder / "registered.toml"
+    registered.write_text(tomli_w.dumps(problem), encoding="utf-8")
+    return {"problem": [registered], "robot": [datasheet_map], "sweep": [sweep]}
 
 
 def records_by_kind() -> dict[str, list[KeyRecord]]:

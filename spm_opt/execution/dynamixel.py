@@ -65,6 +65,7 @@ from spm_opt.execution.backend import (
     MonotonicClock,
     hardware_error_names,
 )
+from spm_opt.input_limits import excerpt
 from spm_opt.model.actuator import Actuator
 
 logger = logging.getLogger(__name__)
@@ -249,7 +250,7 @@ class DynamixelRobot:
             )
         if baud not in BAUD_RATES:
             raise InputError(
-                f"baud: {baud!r} is not supported; expected one of "
+                f"baud: {excerpt(baud)} is not supported; expected one of "
                 f"{', '.join(str(rate) for rate in BAUD_RATES)}"
             )
         if (
@@ -257,14 +258,17 @@ class DynamixelRobot:
             or any(not isinstance(i, int | np.integer) or not 0 <= i <= MAX_ID for i in ids)
             or ids[0] == ids[1]
         ):
-            raise InputError(f"ids: {ids!r}; expected two distinct integers in 0–{MAX_ID}")
+            raise InputError(f"ids: {excerpt(ids)}; expected two distinct integers in 0–{MAX_ID}")
         if not isinstance(retries, int) or retries < 0:
-            raise InputError(f"retries: {retries!r}; expected an integer ≥ 0")
+            raise InputError(f"retries: {excerpt(retries)}; expected an integer ≥ 0")
         if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0.0):
-            raise InputError(f"timeout_s: {timeout_s!r}; expected a positive number of seconds")
+            raise InputError(
+                f"timeout_s: {excerpt(timeout_s)}; expected a positive number of seconds"
+            )
         if not (isinstance(write_timeout_s, int | float) and 0.0 < write_timeout_s <= 1.0):
             raise InputError(
-                f"write_timeout_s: {write_timeout_s!r}; expected a number of seconds in (0, 1]"
+                f"write_timeout_s: {excerpt(write_timeout_s)}; expected a number of seconds "
+                "in (0, 1]"
             )
         self.actuator = actuator
         self.port = port
@@ -353,7 +357,7 @@ class DynamixelRobot:
         Opens the port if needed; call :meth:`connect` afterwards to run again.
         """
         if dxl_id not in self.ids:
-            raise InputError(f"dxl_id: {dxl_id!r} is not one of this robot's ids {self.ids}")
+            raise InputError(f"dxl_id: {excerpt(dxl_id)} is not one of this robot's ids {self.ids}")
         if self._port is None:
             self._open()
         self._transaction("reboot", dxl_id, self._send_bare(dxl_id, "INST_REBOOT"), 0)

@@ -59,6 +59,7 @@ from spm_opt.errors import InputError
 from spm_opt.evaluate import evaluate
 from spm_opt.execution.tracking import Lead, led_goals_outside
 from spm_opt.hold_room import hold_stop
+from spm_opt.input_limits import excerpt
 from spm_opt.limits import RULES
 from spm_opt.problem import Problem
 from spm_opt.ruckig_local import calculate_locally
@@ -488,5 +489,7 @@ class FeedRequests:
 
 def _checked_feed(fraction: float) -> float:
     if not (isinstance(fraction, int | float) and math.isfinite(fraction) and fraction >= 0.0):
-        raise InputError(f"feed = {fraction!r}: expected a fraction of the planned pace, ≥ 0")
+        raise InputError(
+            f"feed = {excerpt(fraction)}: expected a fraction of the planned pace, ≥ 0"
+        )
     return float(fraction)

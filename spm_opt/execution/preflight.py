@@ -4,9 +4,11 @@ Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this or
 
 1. **Made for this problem.** The plan's metadata records the problem it was planned for
    (:meth:`~spm_opt.problem.Problem.record`); its fingerprint (the landmarks, the limits
-   and the robot, not the file's bytes) must be this problem's. A plan that records none
-   (no sidecar, or one written by hand) or another runs only when asked for on purpose
-   (``other_problem``), and is then still judged by this problem's limits.
+   and the robot, not the file's bytes) must be this problem's
+   (:func:`spm_opt.provenance.check_made_for`, as ``review`` and ``evaluate`` check it).
+   A plan that records none (no sidecar, or one written by hand) or another runs only
+   when asked for on purpose (``other_problem``), and is then still judged by this
+   problem's limits.
 2. **At rest at both ends.** The executor joins the plan from rest and holds its last
    goal after it, so the plan's speed and acceleration at each end must be small enough
    that joining rest within one control period T keeps the limits every commanded motion
@@ -45,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from spm_opt import provenance
 from spm_opt.errors import PreflightError
 from spm_opt.evaluate import evaluate
 from spm_opt.execution.feed import JointLimits
@@ -56,8 +59,6 @@ from spm_opt.problem import Problem
 from spm_opt.trajectory import Trajectory
 
 _LOG = logging.getLogger(__name__)
-
-OTHER_PROBLEM_HINT = "plan it again for this problem, or allow it with --other-problem"
 
 
 def check_plan(
@@ -106,26 +107,17 @@ def check_plan(
 
 def check_made_for(problem: Problem, trajectory: Trajectory, other_problem: bool) -> str:
     """Refuse a plan whose metadata does not record ``problem``'s fingerprint, unless
-    ``other_problem``; returns why it was allowed all the same ("" if it is ``problem``'s)."""
-    recorded: Any = trajectory.metadata.get("problem")
-    fingerprint = recorded.get("fingerprint") if isinstance(recorded, dict) else None
-    if fingerprint == problem.fingerprint:
-        return ""
-    if fingerprint is None:
-        why = (
-            "the plan records no problem it was made for (a CSV without its sidecar, or "
-            "one written by hand or by an older spm-opt)"
-        )
-    else:
-        name = recorded.get("name") or "another problem"
-        why = (
-            f"the plan was made for {name} (fingerprint {str(fingerprint)[:12]}), not for "
-            f"{problem.name} ({problem.fingerprint[:12]}): their landmarks, limits or robot "
-            "differ"
-        )
-    if not other_problem:
-        raise PreflightError(f"plan refused: {why}; {OTHER_PROBLEM_HINT}")
-    return why
+    ``other_problem`` (:func:`spm_opt.provenance.check_made_for`); returns why it was
+    allowed all the same ("" if it is ``problem``'s)."""
+    return provenance.check_made_for(
+        problem,
+        trajectory.metadata,
+        "plan",
+        other_problem,
+        refused="plan refused",
+        hint=provenance.PLAN_HINT,
+        error=PreflightError,
+    )
 
 
 def rest_bounds(limits: JointLimits, period_s: float) -> tuple[float, float]:

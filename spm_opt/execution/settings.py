@@ -5,8 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from spm_opt.errors import InputError
-from spm_opt.execution.feed import JointLimits
+from spm_opt.execution.feed import FEED_STEP, JointLimits
 from spm_opt.execution.tracking import TRACKING_MODES
+from spm_opt.input_limits import excerpt
 from spm_opt.model.params import DEG
 from spm_opt.problem import Problem
 
@@ -65,7 +66,11 @@ class ExecutionSettings:
         A write to the log that has not returned after this long is a fault, as one that
         failed is: the run stops safely (the stop never waits on the disk).
     feed : float
-        The feed override the plan starts at, a fraction of its planned pace.
+        The feed override the plan starts at, a fraction of its planned pace: from
+        :data:`~spm_opt.execution.feed.FEED_STEP` (0.1, the lowest the keys set) to 4. A
+        run cannot start held (a feed of 0 would hold at the start until ``max_hold_s``
+        ends it in the safe stop); a hold during the run (``Executor.hold``, or
+        ``Executor.set_feed(0)``) is another matter.
     max_feed : float
         Highest override allowed, if every limit allows it (see
         :func:`~spm_opt.execution.feed.feed_ceiling`).
@@ -114,7 +119,7 @@ class ExecutionSettings:
             "hold_s": (0.0, 60.0),
             "flush_interval_s": (1e-3, 0.1),
             "log_stall_s": (0.05, 60.0),
-            "feed": (0.0, 4.0),
+            "feed": (FEED_STEP, 4.0),
             "max_feed": (1.0, 4.0),
             "max_hold_s": (0.0, 86_400.0),
         }
@@ -123,24 +128,26 @@ class ExecutionSettings:
         for name, (low, high) in checks.items():
             value = getattr(self, name)
             if not (isinstance(value, int | float) and low <= value <= high):
-                raise InputError(f"{name} = {value!r}: expected a number in [{low}, {high}]")
+                raise InputError(f"{name} = {excerpt(value)}: expected a number in [{low}, {high}]")
         for name in ("communication_retries", "rest_position_pulses"):
             if not isinstance(getattr(self, name), int):
-                raise InputError(f"{name} = {getattr(self, name)!r}: expected an integer")
+                raise InputError(f"{name} = {excerpt(getattr(self, name))}: expected an integer")
         for name in ("approach", "other_problem"):
             if not isinstance(getattr(self, name), bool):
-                raise InputError(f"{name} = {getattr(self, name)!r}: expected true or false")
+                raise InputError(f"{name} = {excerpt(getattr(self, name))}: expected true or false")
         if self.tracking not in TRACKING_MODES:
             raise InputError(
-                f"tracking = {self.tracking!r}: expected one of {', '.join(TRACKING_MODES)}"
+                f"tracking = {excerpt(self.tracking)}: expected one of {', '.join(TRACKING_MODES)}"
             )
         if self.feed > self.max_feed:
-            raise InputError(f"feed = {self.feed!r}: expected at most max_feed ({self.max_feed!r})")
+            raise InputError(
+                f"feed = {excerpt(self.feed)}: expected at most max_feed ({excerpt(self.max_feed)})"
+            )
         for name in ("settle_s", "hold_s"):
             if getattr(self, name) < self.rest_window_s:
                 raise InputError(
-                    f"{name} = {getattr(self, name)!r}: expected at least rest_window_s "
-                    f"({self.rest_window_s!r} s), or rest could never be confirmed"
+                    f"{name} = {excerpt(getattr(self, name))}: expected at least rest_window_s "
+                    f"({excerpt(self.rest_window_s)} s), or rest could never be confirmed"
                 )
 
     @property

@@ -9,6 +9,7 @@ import time
 from typing import Any, Protocol, TypeVar
 
 from spm_opt.errors import InputError, PlanningError, UnknownPlannerError
+from spm_opt.input_limits import excerpt
 from spm_opt.problem import Problem
 from spm_opt.skull.depth import depth_setpoint
 from spm_opt.trajectory import Trajectory
@@ -82,7 +83,7 @@ def settings_from_options(
     is one); a one-line InputError naming the key and what is allowed otherwise."""
     values: dict[str, Any] = {}
     for key, value in options.items():
-        where = f"planner.{planner}.{key} = {value!r}"
+        where = f"planner.{planner}.{key} = {excerpt(value)}"
         if choices and key in choices:
             if value not in choices[key]:
                 raise InputError(f"{where}: expected one of {', '.join(choices[key])}")

@@ -5,17 +5,26 @@ It shows, mm in the robot's frame (:mod:`spm_opt.report.review_scene`): the skul
 the flap, the landmarks, the planned contour, the planned cut coloured by its distance from
 the contour, the executed cut of a log, and the robot (arcs, platforms, tool) at a time a
 slider and a play button choose; above the plot, the evaluator's headline figures.
+
+What it is given is checked as ``spm-opt evaluate`` and ``spm-opt execute`` check it
+(:func:`review_inputs`): a plan or a log made for another problem is drawn only when asked
+for, and the page then says so above everything else.
 """
 
 from __future__ import annotations
 
 import html
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from spm_opt.errors import require
 from spm_opt.model.params import MM
+from spm_opt.provenance import PLAN_HINT, check_made_for, check_run_of, log_hint
 from spm_opt.report.review_scene import Cut, ReviewScene, review_scene
 from spm_opt.report.robot_geometry import robot_pose
 
@@ -28,6 +37,8 @@ if TYPE_CHECKING:
     from spm_opt.problem import Problem
     from spm_opt.skull.surface import Skull
     from spm_opt.trajectory import Trajectory
+
+_LOG = logging.getLogger(__name__)
 
 POSES = 90
 """Times the slider shows the robot at, over the plan's duration."""
@@ -49,12 +60,83 @@ _PARTS = (
 """Each of the robot's parts: its :class:`RobotPose` field, name, colour and line width."""
 
 
+@dataclass(frozen=True)
+class ReviewInputs:
+    """What the review draws, checked (:func:`review_inputs`).
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        The plan.
+    log : pandas.DataFrame or None
+        The execution log's table, when one was given.
+    warnings : tuple of str
+        What ``other_problem`` let through, one line each, for the page.
+    """
+
+    trajectory: Trajectory
+    log: pd.DataFrame | None
+    warnings: tuple[str, ...]
+
+
+def review_inputs(
+    problem: Problem, plan: Path, log: Path | None = None, other_problem: bool = False
+) -> ReviewInputs:
+    """Read the plan, and the execution log when given, checked as ``spm-opt evaluate``
+    and ``spm-opt execute`` check them: each must record ``problem`` as the one it was made
+    for or ran under (:func:`spm_opt.provenance.check_made_for`; another, or none, only
+    with ``other_problem``, then logged as a warning and returned for the page), and the
+    log must be a run of the plan (:func:`spm_opt.provenance.check_run_of`). One-line
+    :class:`~spm_opt.errors.InputError` naming the file otherwise.
+
+    Parameters
+    ----------
+    problem : Problem
+    plan : path
+        The plan's CSV (its JSON sidecar beside it).
+    log : path, optional
+        An execution log's CSV (its JSON header beside it).
+    other_problem : bool
+        Draw a plan or a log made for another problem, or recording none.
+    """
+    from spm_opt.evaluate_execution import read_log_checked
+    from spm_opt.trajectory import Trajectory
+
+    trajectory = Trajectory.from_csv(plan)
+    why = check_made_for(
+        problem,
+        trajectory.metadata,
+        "plan",
+        other_problem,
+        refused=f"plan {plan} refused",
+        hint=PLAN_HINT,
+    )
+    warnings = [f"plan {plan}: {why}"] if why else []
+    table = None
+    if log is not None:
+        table, header = read_log_checked(log)
+        why = check_made_for(
+            problem,
+            header,
+            "log",
+            other_problem,
+            refused=f"log {log} refused",
+            hint=log_hint("review"),
+        )
+        warnings += [f"log {log}: {why}"] if why else []
+        check_run_of(trajectory, str(plan), header, str(log))
+    for warning in warnings:
+        _LOG.warning("%s; reviewed under %s's limits as asked", warning, problem.name)
+    return ReviewInputs(trajectory, table, tuple(warnings))
+
+
 def review_page(
     problem: Problem,
     skull: Skull,
     trajectory: Trajectory,
     log: pd.DataFrame | None = None,
     report: Report | None = None,
+    warnings: Sequence[str] = (),
 ) -> str:
     """The review page, a whole HTML document (about 5 MB, plotly's JavaScript inlined).
 
@@ -70,6 +152,8 @@ def review_page(
         measured cut is drawn too.
     report : Report, optional
         The plan's report; by default ``evaluate(problem, trajectory)``.
+    warnings : sequence of str
+        Shown above everything else (what :func:`review_inputs` let through).
     """
     from spm_opt.evaluate import evaluate
 
@@ -82,6 +166,11 @@ def review_page(
     return _DOCUMENT.format(
         title=html.escape(title),
         background=BACKGROUND,
+        warnings="".join(
+            f'<p class="warning">Warning: {html.escape(w)}; reviewed under '
+            f"{html.escape(problem.name)}'s limits.</p>\n"
+            for w in warnings
+        ),
         table=_table(headline_rows(report, scene, skull)),
         violations=_violations(report),
         plot=plot,
@@ -92,8 +181,8 @@ def headline_rows(
     report: Report, scene: ReviewScene, skull: Skull | None = None
 ) -> list[tuple[str, str]]:
     """The figures the page's table shows, as (what, value with its unit): the report's,
-    and of a skull from imaging its registration's error and the landmarks' moves onto
-    it."""
+    and of a skull from imaging its registration's error, its largest fiducial residual
+    and the landmarks' moves onto it."""
     rows = [
         ("planner", report.planner or "(unknown)"),
         ("duration", f"{report.duration_s:.2f} s"),
@@ -112,6 +201,9 @@ def headline_rows(
         rows.append(("max depth acceleration", f"{report.max_depth_acceleration_mm_s2:.1f} mm/s²"))
     if skull is not None and skull.registration_rms_mm is not None:
         rows.append(("registration RMS error", f"{skull.registration_rms_mm:.3f} mm"))
+    if skull is not None and skull.fiducial_residuals_mm is not None:
+        largest = float(np.max(skull.fiducial_residuals_mm))
+        rows.append(("largest fiducial residual", f"{largest:.3f} mm"))
     if skull is not None and skull.landmark_shifts_mm is not None:
         moved = float(np.max(np.abs(skull.landmark_shifts_mm)))
         rows.append(("landmarks moved onto the mesh", f"≤ {moved:.3f} mm"))
@@ -406,11 +498,12 @@ table.headline th, table.headline td {{ border: 1px solid #ccc; padding: 2px 8px
 table.headline th {{ font-weight: normal; color: #444; }}
 table.headline td {{ text-align: center; }}
 details, p {{ font-size: 13px; }}
+p.warning {{ color: #b00000; font-weight: bold; }}
 </style>
 </head>
 <body>
 <h1>{title}</h1>
-{table}
+{warnings}{table}
 {violations}
 {plot}
 </body>

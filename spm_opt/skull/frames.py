@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from spm_opt.errors import InputError
+from spm_opt.input_limits import excerpt
 
 FRAMES = ("RAS", "LPS")
 """The frames a mesh or a markups file may be in, spelt in upper case."""
@@ -21,7 +22,8 @@ def check_frame(value: object, field: str) -> str:
     naming ``field``."""
     if not isinstance(value, str) or value not in FRAMES:
         raise InputError(
-            f"{field} = {value!r}: expected 'RAS' or 'LPS' (the meshes' frame, in upper case)"
+            f"{field} = {excerpt(value)}: expected 'RAS' or 'LPS' (the meshes' frame, in "
+            "upper case)"
         )
     return value
 

@@ -28,6 +28,7 @@ from trimesh.ray.ray_triangle import RayMeshIntersector
 
 from spm_opt.errors import InputError
 from spm_opt.files import write_atomically
+from spm_opt.input_limits import excerpt
 from spm_opt.skull.frames import FRAMES, check_frame, to_ras
 from spm_opt.skull.markups import markups_text
 
@@ -149,8 +150,8 @@ def draw_parameters(
         if value is not None:
             if not allowed[0] <= value <= allowed[1]:
                 raise InputError(
-                    f"{name} = {value!r}: expected a skull's {name[:-3]} from {allowed[0]:g} "
-                    f"to {allowed[1]:g} mm"
+                    f"{name} = {excerpt(value)}: expected a skull's {name[:-3]} from "
+                    f"{allowed[0]:g} to {allowed[1]:g} mm"
                 )
             semi_axes[index] = value / 2.0
     return SkullParameters(
@@ -196,7 +197,7 @@ def generate_skull(
     image's RAS frame, mm."""
     if subdivisions not in SUBDIVISIONS:
         raise InputError(
-            f"subdivisions = {subdivisions!r}: expected {SUBDIVISIONS[0]} to "
+            f"subdivisions = {excerpt(subdivisions)}: expected {SUBDIVISIONS[0]} to "
             f"{SUBDIVISIONS[-1]} (5: 20,480 triangles a surface; each more: 4 times as many)"
         )
     parameters = draw_parameters(seed, length_mm=length_mm, breadth_mm=breadth_mm)

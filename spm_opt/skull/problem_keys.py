@@ -6,10 +6,12 @@ landmarks_file = "flap.mrk.json"      # a 3D Slicer markups file, relative to th
 outer_mesh = "skull_outer.stl"        # relative to this file, mm, in `frame`
 inner_mesh = "skull_inner.stl"        # optional
 frame = "RAS"                         # or "LPS": the meshes' frame
+max_landmark_shift_mm = 5             # optional: the farthest a landmark moves onto the mesh
 image_to_robot = [[1, 0, 0, 0.5], [0, 1, 0, 21.1], [0, 0, 1, -6.2], [0, 0, 0, 1]]
 [skull.registration]                  # or, instead of image_to_robot:
 image_fiducials_mm = [[...], ...]     # in `frame`
 robot_fiducials_mm = [[...], ...]
+max_fiducial_residual_mm = 2          # optional: the largest residual of the fit
 ```
 
 ``image_to_robot`` takes the image's RAS coordinates (mm) to the robot's frame (mm): a mesh
@@ -31,8 +33,28 @@ from spm_opt.model.params import MM
 from spm_opt.skull.frames import FRAMES, to_ras
 from spm_opt.skull.landmark_surface import LandmarkSurface
 from spm_opt.skull.markups import read_markups
-from spm_opt.skull.registration import apply, check_transform, fit_rigid
+from spm_opt.skull.registration import (
+    Registration,
+    apply,
+    check_residuals,
+    check_transform,
+    fit_rigid,
+)
 from spm_opt.skull.surface import Skull
+
+MAX_LANDMARK_SHIFT_MM = 5.0
+"""Default of ``[skull] max_landmark_shift_mm``: the farthest a landmark may move along its
+direction from the isocenter onto the outer mesh, mm. A point placed on the bone's surface
+in the image lies within a voxel or two of the mesh segmented from it (the generated
+example's: within 0.00001 mm); one farther out was placed on something else (the scalp,
+say), in another frame or unit, or on another skull."""
+MAX_FIDUCIAL_RESIDUAL_MM = 2.0
+"""Default of ``[skull.registration] max_fiducial_residual_mm``: the largest distance
+allowed, mm, between a robot fiducial and its image fiducial once the fit is applied. Bone
+fiducials located well give residuals of a fraction of a millimetre; a residual above 2 mm
+is a fiducial located wrongly in one frame (one 20 mm off among the generated example's
+four gives residuals up to 8.5 mm, RMS 6.4 mm), and every point of the cut inherits the
+fit's error."""
 
 
 @dataclass(frozen=True)
@@ -47,19 +69,26 @@ class SkullKeys:
         The meshes' frame, "RAS" or "LPS".
     outer, inner : trimesh.Trimesh or None
         The meshes in the robot's frame, m.
-    registration_rms_mm : float or None
+    registration : Registration or None
+        The fit of the fiducials, when the transform came from them.
     field : str
         The file and the outer mesh's key, for messages.
     depth_margin : float, m
+    max_landmark_shift : float, m
+        The farthest a landmark may move along its direction onto the outer mesh.
+    shift_field : str
+        The file and that bound's key, for messages.
     """
 
     image_to_robot_mm: np.ndarray | None
     frame: str
     outer: object | None
     inner: object | None
-    registration_rms_mm: float | None
+    registration: Registration | None
     field: str
     depth_margin: float
+    max_landmark_shift: float
+    shift_field: str
 
 
 def read_skull_table(table: Table, folder: Path) -> SkullKeys | None:
@@ -67,12 +96,18 @@ def read_skull_table(table: Table, folder: Path) -> SkullKeys | None:
     if not table.keys():
         return None
     frame = table.string("frame", choices=FRAMES)
-    matrix, rms = _transform(table, frame)
+    matrix, registration = _transform(table, frame)
     outer_key = table.string("outer_mesh", default="")
     inner_key = table.string("inner_mesh", default="")
     if inner_key and not outer_key:
         raise table.error("inner_mesh", inner_key, "expected an outer_mesh beside it")
     margin = table.number("depth_margin_mm", default=0.0, minimum=-20.0, maximum=20.0)
+    shift = table.number(
+        "max_landmark_shift_mm",
+        default=MAX_LANDMARK_SHIFT_MM,
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
     table.finish()
     outer = inner = None
     if outer_key:
@@ -85,12 +120,23 @@ def read_skull_table(table: Table, folder: Path) -> SkullKeys | None:
             inner = to_robot(
                 load_mesh(folder / inner_key, frame, table.name("inner_mesh")), frame, matrix
             )
-    return SkullKeys(matrix, frame, outer, inner, rms, table.name("outer_mesh"), margin * MM)
+    return SkullKeys(
+        matrix,
+        frame,
+        outer,
+        inner,
+        registration,
+        table.name("outer_mesh"),
+        margin * MM,
+        shift * MM,
+        table.name("max_landmark_shift_mm"),
+    )
 
 
-def _transform(table: Table, frame: str) -> tuple[np.ndarray, float | None]:
-    """The image-to-robot transform (4, 4), mm, and the registration's RMS error (mm, or
-    None for a matrix given as it is)."""
+def _transform(table: Table, frame: str) -> tuple[np.ndarray, Registration | None]:
+    """The image-to-robot transform (4, 4), mm, and the fiducials' fit (None for a matrix
+    given as it is), refused when a fiducial's residual exceeds the table's
+    ``max_fiducial_residual_mm``."""
     has_matrix, has_fiducials = table.has("image_to_robot"), table.has("registration")
     if has_matrix == has_fiducials:
         raise InputError(
@@ -103,9 +149,16 @@ def _transform(table: Table, frame: str) -> tuple[np.ndarray, float | None]:
     fiducials = table.table("registration")
     image = _points(fiducials, "image_fiducials_mm")
     robot = _points(fiducials, "robot_fiducials_mm")
+    largest = fiducials.number(
+        "max_fiducial_residual_mm",
+        default=MAX_FIDUCIAL_RESIDUAL_MM,
+        minimum=0.0,
+        exclusive_minimum=True,
+    )
     fiducials.finish()
     registration = fit_rigid(to_ras(image, frame), robot, fiducials.name("image_fiducials_mm"))
-    return registration.matrix_mm, registration.rms_mm
+    check_residuals(registration, largest, fiducials.name("max_fiducial_residual_mm"))
+    return registration.matrix_mm, registration
 
 
 def _points(table: Table, key: str) -> np.ndarray:
@@ -139,13 +192,19 @@ def markup_landmarks(
 
 
 def skull_on_mesh(
-    keys: SkullKeys, names: tuple[str, ...], landmarks: np.ndarray
+    keys: SkullKeys, names: tuple[str, ...], landmarks: np.ndarray, origin: str = ""
 ) -> tuple[Skull, np.ndarray]:
     """The problem's skull and its landmarks moved along their directions onto the outer
-    mesh (m); without a mesh, the smooth surface through the landmarks as they are."""
+    mesh (m), each at most ``keys.max_landmark_shift``; without a mesh, the smooth surface
+    through the landmarks as they are. ``origin`` names where the landmarks were read
+    (a markups file), for messages."""
+    registration = keys.registration
+    fit = {
+        "registration_rms_mm": None if registration is None else registration.rms_mm,
+        "fiducial_residuals_mm": None if registration is None else registration.residuals_mm,
+    }
     if keys.outer is None:
-        surface = LandmarkSurface(landmarks)
-        return Skull(surface, registration_rms_mm=keys.registration_rms_mm), landmarks
+        return Skull(LandmarkSurface(landmarks), **fit), landmarks
     from spm_opt.skull.raycast import MeshSurface
 
     surface = MeshSurface(keys.outer, keys.inner)
@@ -164,6 +223,17 @@ def skull_on_mesh(
                 f"{keys.field}: landmark {name}: the ray from the isocenter through it meets "
                 f"the outer surface {count} times; it must meet it once"
             )
+    shifts = on_mesh - radii
+    far = int(np.argmax(np.abs(shifts)))
+    if abs(shifts[far]) > keys.max_landmark_shift:
+        where = f" of {origin}" if origin else ""
+        side = "outside" if shifts[far] < 0.0 else "inside"
+        raise InputError(
+            f"{keys.shift_field} = {keys.max_landmark_shift / MM:g}: landmark {names[far]}"
+            f"{where} lies {abs(shifts[far]) / MM:.1f} mm {side} the outer surface along its "
+            f"direction from the isocenter; expected at most {keys.max_landmark_shift / MM:g} "
+            "mm (a point of this skull, in its frame and units?)"
+        )
     digest = hashlib.sha256()
     for mesh in (keys.outer, keys.inner):
         if mesh is not None:
@@ -174,9 +244,9 @@ def skull_on_mesh(
         surface=surface,
         outer_mesh=keys.outer,
         inner_mesh=keys.inner,
-        registration_rms_mm=keys.registration_rms_mm,
-        landmark_shifts_mm=(on_mesh - radii) / MM,
+        landmark_shifts_mm=shifts / MM,
         fingerprint=digest.hexdigest(),
         depth_margin=keys.depth_margin,
+        **fit,
     )
     return skull, on_mesh[:, None] * directions

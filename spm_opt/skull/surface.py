@@ -46,6 +46,9 @@ class Skull:
     registration_rms_mm : float or None
         The fiducial registration error (RMS of the fiducials' residuals), mm, when the
         image-to-robot transform came from fiducials.
+    fiducial_residuals_mm : ndarray (n,) or None
+        Each fiducial's residual, mm: how far the fit puts it from where the robot
+        located it.
     landmark_shifts_mm : ndarray (n,) or None
         How far each landmark moved along its direction onto the outer mesh, mm.
     fingerprint : str
@@ -58,6 +61,7 @@ class Skull:
     outer_mesh: trimesh.Trimesh | None = None
     inner_mesh: trimesh.Trimesh | None = None
     registration_rms_mm: float | None = None
+    fiducial_residuals_mm: np.ndarray | None = None
     landmark_shifts_mm: np.ndarray | None = None
     fingerprint: str = ""
     depth_margin: float = 0.0

@@ -54,6 +54,7 @@ from scipy.optimize import brentq
 
 from spm_opt.contour import Contour
 from spm_opt.errors import InputError, UnreachableError
+from spm_opt.input_limits import excerpt
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.problem import Problem
@@ -138,7 +139,9 @@ class Flap:
             interpolated) divided by it, rounded up to 0.1 s, at least 1 s.
         """
         if not (_is_number(speed_mm_s) and math.isfinite(speed_mm_s) and speed_mm_s > 0):
-            raise InputError(f"speed_mm_s = {speed_mm_s!r}: expected a positive number (mm/s)")
+            raise InputError(
+                f"speed_mm_s = {excerpt(speed_mm_s)}: expected a positive number (mm/s)"
+            )
         lengths_mm = Contour(self.positions_mm * MM, closed=True).arc_lengths / MM
         return [
             max(1.0, math.ceil(round(length / speed_mm_s * 10, 6)) / 10) for length in lengths_mm
@@ -290,14 +293,14 @@ def _is_integer(value: Any) -> bool:
 
 def _check_arguments(count: Any, size_range_mm: Any, landmarks: Any, seed: Any) -> None:
     if not _is_integer(count) or count < 1:
-        raise InputError(f"count = {count!r}: expected an integer of at least 1")
+        raise InputError(f"count = {excerpt(count)}: expected an integer of at least 1")
     if not (_is_integer(landmarks) and landmarks >= 3 or _is_landmark_range(landmarks)):
         raise InputError(
-            f"landmarks = {landmarks!r}: expected an integer of at least 3, or (low, high) "
+            f"landmarks = {excerpt(landmarks)}: expected an integer of at least 3, or (low, high) "
             "integers with 3 <= low <= high"
         )
     if not _is_integer(seed) or seed < 0:
-        raise InputError(f"seed = {seed!r}: expected a non-negative integer")
+        raise InputError(f"seed = {excerpt(seed)}: expected a non-negative integer")
     _check_range("size_range_mm", size_range_mm, "mm", MIN_SIZE_MM, exclusive=False)
 
 
@@ -332,7 +335,7 @@ def _check_range(name: str, bounds: Any, unit: str, minimum: float, exclusive: b
     if not (finite and (low > minimum or low == minimum and not exclusive) and low <= high):
         floor = f"{minimum:g} {'<' if exclusive else '<='}"
         raise InputError(
-            f"{name} = {bounds!r}: expected (low, high) in {unit} with {floor} low <= high, "
+            f"{name} = {excerpt(bounds)}: expected (low, high) in {unit} with {floor} low <= high, "
             "both finite"
         )
 

@@ -28,6 +28,7 @@ import pandas as pd
 
 from spm_opt.errors import InputError
 from spm_opt.files import write_atomically
+from spm_opt.input_limits import excerpt
 from spm_opt.report.columns import COLUMNS, column
 from spm_opt.report.markdown import markdown_table
 from spm_opt.sweep import results_figures as draw
@@ -136,17 +137,17 @@ def _checked(row: Any, where: str) -> dict[str, Any]:
         raise InputError(f"{where}: expected a JSON object, got {type(row).__name__}")
     for name in ("key", "planner", "status"):
         if not isinstance(row.get(name), str):
-            raise InputError(f"{where}: {name!r} must be a string, got {row.get(name)!r}")
+            raise InputError(f"{where}: {name!r} must be a string, got {excerpt(row.get(name))}")
     parameters = row.setdefault("parameters", {})
     if not isinstance(parameters, dict):
-        raise InputError(f"{where}: 'parameters' must be an object, got {parameters!r}")
+        raise InputError(f"{where}: 'parameters' must be an object, got {excerpt(parameters)}")
     for name in parameters:
         if name in row or name in COLUMNS or name == "failure":
             raise InputError(f"{where}: parameter {name!r} has the name of a field")
     for name in NUMERIC_COLUMNS:
         value = row.get(name)
         if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
-            raise InputError(f"{where}: {name!r} must be a number or null, got {value!r}")
+            raise InputError(f"{where}: {name!r} must be a number or null, got {excerpt(value)}")
     return row
 
 

@@ -72,6 +72,7 @@ from typing import Any
 import numpy as np
 
 from spm_opt.errors import InputError, SpmOptError, require
+from spm_opt.input_limits import excerpt
 from spm_opt.sweep.results import RESULTS_FILE
 from spm_opt.sweep.task import MACHINE, RESULT, Task, failure_kind, run_task
 
@@ -224,7 +225,9 @@ def run_sweep(
 
 def _check_workers(workers: Any) -> None:
     if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise InputError(f"--workers {workers!r}: expected a whole number of processes, >= 1")
+        raise InputError(
+            f"--workers {excerpt(workers)}: expected a whole number of processes, >= 1"
+        )
 
 
 def _check_scheduler(scheduler: Any) -> None:

@@ -248,6 +248,9 @@ def load_sweep_spec(path: str | Path, max_tasks: int = DEFAULT_MAX_TASKS) -> Swe
         raise root.error(
             "planners", planners, f"expected a non-empty list of {', '.join(sorted(PLANNERS))}"
         )
+    twice = next((name for i, name in enumerate(planners) if name in planners[:i]), None)
+    if twice is not None:
+        raise root.error("planners", planners, f"expected each planner once ({twice} twice)")
     grid_table = root.table("grid", required=False)
     grid = _grid(grid_table)
     random = _random(root.table("random", required=False), problem_path, grid)
@@ -276,18 +279,43 @@ def _check_value(table: Table, key: str, value: Any, problem_path: Path) -> None
 
 
 def _grid(table: Table) -> dict[str, list[Any]]:
-    """The ``[grid]`` table's axes, each a non-empty list of distinct values (the values
-    themselves are checked once the sweep's size is: :func:`_check_value`)."""
+    """The ``[grid]`` table's axes, each a non-empty list of distinct values: numbers
+    equal in value are one value, so ``[2, 2.0]`` is refused like ``[2, 2]`` (a problem
+    reads both as 2.0, and the sweep would run that one problem twice). The values
+    themselves are checked once the sweep's size is: :func:`_check_value`."""
     grid = {}
     for key in table.keys():
         values = table.raw(key)
         if not isinstance(values, list) or not values:
             raise table.error(key, values, "expected a non-empty list of values (an axis)")
-        if len({repr(v) for v in values}) < len(values):
-            raise table.error(key, values, "expected each value once")
+        seen: dict[Any, Any] = {}
+        for index, value in enumerate(values):
+            first = values[seen.setdefault(_compared(value), index)]
+            if seen[_compared(value)] != index:
+                same = repr(first) == repr(value)
+                again = (
+                    f"{excerpt(value)} twice"
+                    if same
+                    else f"{excerpt(first)} and {excerpt(value)} are one value"
+                )
+                raise table.error(key, values, f"expected each value once ({again})")
         grid[key] = values
     table.finish()
     return grid
+
+
+def _compared(value: Any) -> Any:
+    """A grid value as repeats are found: numbers by value (2 and 2.0 are one; true is
+    not 1), lists and tables item by item, anything else as it is."""
+    if isinstance(value, bool):
+        return ("boolean", value)
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, list):
+        return tuple(_compared(item) for item in value)
+    if isinstance(value, dict):
+        return tuple(sorted((key, _compared(item)) for key, item in value.items()))
+    return value
 
 
 def _random(table: Table, problem_path: Path, grid: dict[str, list[Any]]) -> RandomAxes | None:

@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from spm_opt.errors import InputError
+from spm_opt.input_limits import excerpt
 from spm_opt.model.params import MM, Robot
 
 __all__ = [
@@ -416,11 +417,13 @@ def synthetic_capture(
     low, high = float(bounds[0]), float(bounds[1])
     if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
         raise InputError(
-            f"noise_std_m = {noise_std_m!r}: expected a standard deviation >= 0 in m or a "
+            f"noise_std_m = {excerpt(noise_std_m)}: expected a standard deviation >= 0 in m or a "
             "range (low, high) with 0 <= low <= high"
         )
     if not (math.isfinite(max_translation_m) and max_translation_m >= 0.0):
-        raise InputError(f"max_translation_m = {max_translation_m!r}: expected a distance >= 0")
+        raise InputError(
+            f"max_translation_m = {excerpt(max_translation_m)}: expected a distance >= 0"
+        )
 
     generator = np.random.default_rng(rng)
     rotation = Rotation.random(random_state=generator).as_matrix()
@@ -468,7 +471,9 @@ def reference_landmarks(robot_or_radius: Robot | float) -> np.ndarray:
     else:
         radius = float(robot_or_radius)
     if not (math.isfinite(radius) and radius > 0.0):
-        raise InputError(f"robot_or_radius = {robot_or_radius!r}: expected a radius > 0 in m")
+        raise InputError(
+            f"robot_or_radius = {excerpt(robot_or_radius)}: expected a radius > 0 in m"
+        )
     azimuth = np.deg2rad(22.5 + 45.0 * np.arange(8))
     height = np.where(np.arange(8) % 2 == 0, 0.0, -0.2 * radius)
     return np.column_stack([radius * np.cos(azimuth), radius * np.sin(azimuth), height])

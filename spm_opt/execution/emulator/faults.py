@@ -17,16 +17,19 @@ from spm_opt.errors import InputError
 from spm_opt.execution.protocol import (
     MAX_ID,
 )
+from spm_opt.input_limits import excerpt
 
 
 def _check_time(kind: str, name: str, value: float) -> None:
     if not (math.isfinite(value) and value >= 0.0):
-        raise InputError(f"fault {kind}: {name} must be a time >= 0 s, got {value!r}")
+        raise InputError(f"fault {kind}: {name} must be a time >= 0 s, got {excerpt(value)}")
 
 
 def _check_count(kind: str, count: int | None) -> None:
     if count is not None and (isinstance(count, bool) or not isinstance(count, int) or count < 1):
-        raise InputError(f"fault {kind}: count must be an integer >= 1 (or omitted), got {count!r}")
+        raise InputError(
+            f"fault {kind}: count must be an integer >= 1 (or omitted), got {excerpt(count)}"
+        )
 
 
 def _check_id(kind: str, device_id: int) -> None:
@@ -35,11 +38,13 @@ def _check_id(kind: str, device_id: int) -> None:
         or not isinstance(device_id, int)
         or not 0 <= device_id <= MAX_ID
     ):
-        raise InputError(f"fault {kind}: id must be an integer 0-{MAX_ID}, got {device_id!r}")
+        raise InputError(
+            f"fault {kind}: id must be an integer 0-{MAX_ID}, got {excerpt(device_id)}"
+        )
 
 
 def _spec(kind: str, **values: float | int | None) -> str:
-    text = ",".join(f"{k}={v!r}" for k, v in values.items() if v is not None)
+    text = ",".join(f"{k}={excerpt(v)}" for k, v in values.items() if v is not None)
     return f"{kind}:{text}"
 
 
@@ -87,7 +92,7 @@ class DelayReplies:
         _check_time("delay", "at", self.at)
         _check_count("delay", self.count)
         if not (math.isfinite(self.seconds) and self.seconds > 0.0):
-            raise InputError(f"fault delay: seconds must be > 0, got {self.seconds!r}")
+            raise InputError(f"fault delay: seconds must be > 0, got {excerpt(self.seconds)}")
 
     def spec(self) -> str:
         """The text form read by :func:`parse_fault`."""
@@ -142,7 +147,7 @@ class RefusedWrites:
     def __post_init__(self) -> None:
         _check_time("write", "at", self.at)
         if not (math.isfinite(self.seconds) and self.seconds > 0.0):
-            raise InputError(f"fault write: seconds must be > 0, got {self.seconds!r}")
+            raise InputError(f"fault write: seconds must be > 0, got {excerpt(self.seconds)}")
 
     def spec(self) -> str:
         """The text form read by :func:`parse_fault`."""

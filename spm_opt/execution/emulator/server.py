@@ -46,6 +46,7 @@ from spm_opt.execution.protocol import (
     build_status,
     layout_consistent,
 )
+from spm_opt.input_limits import excerpt
 from spm_opt.model.params import Robot
 
 INTERBYTE_TIMEOUT_S = 0.1
@@ -114,7 +115,7 @@ class Emulator:
     ) -> None:
         ids = tuple(ids)
         if not _valid_ids(ids):
-            raise InputError(f"ids: expected two distinct ids 0-{MAX_ID}, got {ids!r}")
+            raise InputError(f"ids: expected two distinct ids 0-{MAX_ID}, got {excerpt(ids)}")
         self.faults = faults or Faults()
         unknown = self.faults.ids() - set(ids)
         if unknown:
