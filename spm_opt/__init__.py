@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import importlib
 import logging
+import sys
+import types
 from typing import TYPE_CHECKING, Any
 
 from spm_opt.errors import (
@@ -80,6 +82,19 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *_HOMES, "__version__"})
+
+
+class _Package(types.ModuleType):
+    """The package: importing a submodule named as a public name (``spm_opt.evaluate``,
+    the module of ``evaluate``) leaves that name to what it names (the function)."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in _HOMES and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
 
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -150,3 +150,12 @@ def test_the_package_and_the_command_import_nothing_heavy_until_used():
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert run.stdout.splitlines() == ["[]", "[] True"]
+
+
+def test_a_public_name_stays_what_it_names_when_its_module_is_imported_first():
+    code = (
+        "import sys, spm_opt.evaluate, spm_opt as so\n"
+        "print(callable(so.evaluate), so.evaluate is sys.modules['spm_opt.evaluate'].evaluate)"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.split() == ["True", "True"]
