@@ -15,6 +15,7 @@ import signal
 import sys
 import textwrap
 import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
@@ -246,6 +247,15 @@ def _parser() -> argparse.ArgumentParser:
         "--other-problem",
         action="store_true",
         help="judge a log under PROBLEM though it ran under another (default: refused)",
+    )
+    cache = commands.add_parser(
+        "cache", help="the cache of compiled libraries: what it holds, or clear it"
+    )
+    cache.add_argument(
+        "action",
+        choices=("info", "clear"),
+        help="info: its folder, entries, total size and size bound; clear: remove every "
+        "entry but the builds in progress",
     )
     for command in commands.choices.values():
         # -v after the command as well; SUPPRESS keeps a -v given before it
@@ -724,6 +734,29 @@ def _compare(args: argparse.Namespace) -> None:
         raise GateFailed(f"{len(failed)} of {len(outcomes)} planners failed: {', '.join(failed)}")
 
 
+def _cache(args: argparse.Namespace) -> None:
+    from spm_opt.model import library_cache
+
+    directory = library_cache.cache_directory()
+    if directory.exists() and not directory.is_dir():
+        raise InputError(f"{library_cache.CACHE_ENV} = {directory}: not a folder")
+    if args.action == "clear":
+        removed = library_cache.clear()
+        size = sum(entry.size for entry in removed) / 1e6
+        print(f"{directory}: entries removed: {len(removed)}, {size:.2f} MB")
+        return
+    bound = library_cache.size_bound() / 1e6
+    listed = library_cache.entries()
+    size = sum(entry.size for entry in listed) / 1e6
+    print(f"folder   {directory}")
+    print(f"entries  {len(listed)}, {size:.2f} MB; builds in progress: {library_cache.builds()}")
+    print(f"bound    {bound:g} MB (${library_cache.SIZE_ENV}); least recently used go first")
+    width = max((len(entry.name) for entry in listed), default=0)
+    for entry in reversed(listed):
+        used = time.strftime("%Y-%m-%d %H:%M", time.localtime(entry.used))
+        print(f"  {entry.name:<{width}}  {entry.size / 1e6:8.2f} MB  used {used}")
+
+
 _COMMANDS = {
     "reproduce": _reproduce,
     "plan": _plan,
@@ -734,6 +767,7 @@ _COMMANDS = {
     "execute": _execute,
     "emulate": _emulate,
     "sweep": _sweep,
+    "cache": _cache,
 }
 
 
@@ -780,6 +814,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _run(args)
     finally:
+        _wait_for_builds()
         logger.removeHandler(handler)
         logger.setLevel(level)
 
@@ -811,6 +846,19 @@ def _run(args: argparse.Namespace) -> int:
         _second_interrupt_ends()
         return 130
     return 0
+
+
+def _wait_for_builds() -> None:
+    """Wait for the libraries a planner compiles in the background, so that a failed
+    build's warning reaches stderr (:mod:`spm_opt.planners.ocp.nlp_library`)."""
+    library = sys.modules.get("spm_opt.planners.ocp.nlp_library")
+    if library is None:
+        return
+    try:
+        library.wait_for_builds()
+    except KeyboardInterrupt:
+        print("spm-opt: interrupted: a build ends first (Ctrl-C again stops it)", file=sys.stderr)
+        _second_interrupt_ends()
 
 
 def _second_interrupt_ends() -> None:
