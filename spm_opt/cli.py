@@ -11,14 +11,14 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import signal
 import sys
 import textwrap
 import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from spm_opt.errors import InputError, PlanningError, RunInterrupted, SpmOptError, require
 from spm_opt.output_paths import check_output_directory, check_output_file
@@ -251,6 +251,15 @@ def _parser() -> argparse.ArgumentParser:
         "--other-problem",
         action="store_true",
         help="judge a log under PROBLEM though it ran under another (default: refused)",
+    )
+    cache = commands.add_parser(
+        "cache", help="the cache of compiled libraries: what it holds, or clear it"
+    )
+    cache.add_argument(
+        "action",
+        choices=("info", "clear"),
+        help="info: its folder, entries, total size and size bound; clear: remove every "
+        "entry but the builds in progress",
     )
     for command in commands.choices.values():
         # -v after the command as well; SUPPRESS keeps a -v given before it
@@ -741,6 +750,29 @@ def _compare(args: argparse.Namespace) -> None:
         raise GateFailed(f"{len(failed)} of {len(outcomes)} planners failed: {', '.join(failed)}")
 
 
+def _cache(args: argparse.Namespace) -> None:
+    from spm_opt.model import library_cache
+
+    directory = library_cache.cache_directory()
+    if directory.exists() and not directory.is_dir():
+        raise InputError(f"{library_cache.CACHE_ENV} = {directory}: not a folder")
+    if args.action == "clear":
+        removed = library_cache.clear()
+        size = sum(entry.size for entry in removed) / 1e6
+        print(f"{directory}: entries removed: {len(removed)}, {size:.2f} MB")
+        return
+    bound = library_cache.size_bound() / 1e6
+    listed = library_cache.entries()
+    size = sum(entry.size for entry in listed) / 1e6
+    print(f"folder   {directory}")
+    print(f"entries  {len(listed)}, {size:.2f} MB; builds in progress: {library_cache.builds()}")
+    print(f"bound    {bound:g} MB (${library_cache.SIZE_ENV}); least recently used go first")
+    width = max((len(entry.name) for entry in listed), default=0)
+    for entry in reversed(listed):
+        used = time.strftime("%Y-%m-%d %H:%M", time.localtime(entry.used))
+        print(f"  {entry.name:<{width}}  {entry.size / 1e6:8.2f} MB  used {used}")
+
+
 _COMMANDS = {
     "reproduce": _reproduce,
     "plan": _plan,
@@ -751,6 +783,7 @@ _COMMANDS = {
     "execute": _execute,
     "emulate": _emulate,
     "sweep": _sweep,
+    "cache": _cache,
 }
 
 
@@ -797,28 +830,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         level = logger.level
         handler = _log_to_stderr(args.verbose)
         try:
-            return _run(args)
+            status = _run(args)
+            try:
+                _wait_for_builds()
+            except KeyboardInterrupt:
+                return _interrupted(
+                    "the command's output stands; the library compiling in the background "
+                    "is left for the next run"
+                )
+            return status
         finally:
             logger.removeHandler(handler)
             logger.setLevel(level)
     except KeyboardInterrupt:
         return _interrupted()
-
-
-def console() -> NoReturn:
-    """The ``spm-opt`` program: :func:`main`, then exit. The exit may wait for a compiler
-    the command started (:mod:`spm_opt.planners.ocp.nlp_library`); a Ctrl-C then ends the
-    process at once, in one line, with status 130."""
-    status = main()
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-        signal.signal(signal.SIGINT, _end_at_once)
-    sys.exit(status)
-
-
-def _end_at_once(_signum: int, _frame: Any) -> None:
-    """SIGINT after :func:`main` returned: what the command wrote stands; end now."""
-    os.write(2, b"spm-opt: interrupted while ending (a background compile is left unfinished)\n")
-    os._exit(130)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -848,15 +873,25 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _interrupted() -> int:
-    """After a Ctrl-C: a second one ends the process at once (the exit may wait for a
-    compile the interrupted planner started, :mod:`spm_opt.planners.ocp.nlp_library`);
-    one line; status 130."""
+def _wait_for_builds() -> None:
+    """Wait for the libraries a planner compiles in the background, so that a failed
+    build's warning reaches stderr (:mod:`spm_opt.planners.ocp.nlp_library`)."""
+    library = sys.modules.get("spm_opt.planners.ocp.nlp_library")
+    if library is not None:
+        library.wait_for_builds()
+
+
+def _interrupted(what: str = "nothing written") -> int:
+    """After a Ctrl-C: the compilers the command started stop (the process need not wait
+    for them), and a second Ctrl-C ends the process at once; one line; status 130."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_DFL)
-    print("spm-opt: interrupted: nothing written", file=sys.stderr)
+    library_cache = sys.modules.get("spm_opt.model.library_cache")
+    if library_cache is not None:
+        library_cache.stop_compilers()
+    print(f"spm-opt: interrupted: {what}", file=sys.stderr)
     return 130
 
 
 if __name__ == "__main__":
-    console()
+    sys.exit(main())

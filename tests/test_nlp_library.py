@@ -6,12 +6,16 @@ import logging
 import multiprocessing
 import os
 import stat
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
+from test_bad_inputs import run_cli
 
-from spm_opt.model import compiled
+from spm_opt.errors import PlanningError
+from spm_opt.model import library_cache
+from spm_opt.planners import PLANNERS
 from spm_opt.planners.ocp import nlp_library
 from spm_opt.planners.ocp.nlp_library import COMPILED, INTERPRETED, LOADED, nlp_solver
 
@@ -19,6 +23,7 @@ OPTIONS = {"ipopt": {"print_level": 0, "sb": "yes"}, "print_time": False, "calc_
 ARGUMENTS = {"x0": [0.0, 0.0], "p": [1.0, 100.0], "lbg": -np.inf, "ubg": 1.5}
 ROSENBROCK = (0.907234, 0.822755)  # constrained optimum for p = (1, 100)
 NAMES = ("rosenbrock_value", "rosenbrock_jacobian", "rosenbrock_hessian")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def rosenbrock() -> list[ca.Function]:
@@ -67,15 +72,15 @@ def solve(key: str, build=rosenbrock, **kwargs) -> tuple[nlp_library.Solver, np.
 
 @pytest.fixture
 def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv(compiled.CACHE_ENV, str(tmp_path))
-    yield tmp_path
+    monkeypatch.setenv(library_cache.CACHE_ENV, str(tmp_path / "cache"))
+    yield tmp_path / "cache"
     nlp_library.wait_for_builds()
 
 
-def failing_compiler(directory) -> str:
-    """A compiler that always fails, with a message."""
-    script = directory / "failing-cc"
-    script.write_text("#!/bin/sh\necho 'fatal: out of luck' >&2\nexit 1\n")
+def failing_compiler(directory, seconds: float = 0.0) -> str:
+    """A compiler that always fails, after ``seconds``, with a message."""
+    script = directory.parent / "failing-cc"
+    script.write_text(f"#!/bin/sh\nsleep {seconds}\necho 'fatal: out of luck' >&2\nexit 1\n")
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
     return str(script)
 
@@ -99,7 +104,7 @@ def test_second_call_loads_without_graph_or_compiler(cache, monkeypatch):
     def no_compiler(*args):
         raise AssertionError("the compiler ran although the library is cached")
 
-    monkeypatch.setattr(nlp_library, "build_library", no_compiler)
+    monkeypatch.setattr(nlp_library, "build", no_compiler)
     second, x = solve("rosenbrock", build=unused)
     assert second.kind == LOADED and second.library == first.library
     assert second.seconds < 1.0
@@ -120,8 +125,8 @@ def test_key_chooses_the_library(cache):
     first, _ = solve("rosenbrock v1", background=False)
     second, _ = solve("rosenbrock v2", background=False)
     assert second.kind == COMPILED and second.library != first.library
-    assert nlp_library.library_path(compiled.compiler(), "rosenbrock v1") == first.library
-    assert len(list(cache.glob("*.so"))) == 2
+    assert nlp_library.library_path(library_cache.compiler(), "rosenbrock v1") == first.library
+    assert len(library_cache.entries()) == 2
 
 
 @pytest.mark.parametrize("missing", ["CC", "PATH"])
@@ -130,7 +135,7 @@ def test_no_compiler_means_the_interpreter_and_one_warning(cache, monkeypatch, c
         monkeypatch.setenv("CC", str(cache / "no-such-compiler"))
     else:
         monkeypatch.delenv("CC", raising=False)
-        monkeypatch.setenv("PATH", str(cache))
+        monkeypatch.setenv("PATH", str(cache.parent))
     with caplog.at_level(logging.WARNING, logger=nlp_library.__name__):
         solver, x = solve("rosenbrock", background=False)
     assert solver.kind == INTERPRETED and solver.library is None
@@ -138,7 +143,7 @@ def test_no_compiler_means_the_interpreter_and_one_warning(cache, monkeypatch, c
     assert [r.message for r in caplog.records] == [
         "no C compiler: the NLP 'rosenbrock' runs in CasADi's interpreter"
     ]
-    assert not list(cache.iterdir())
+    assert not cache.exists()
 
 
 def test_failed_build_means_the_interpreter_and_one_warning(cache, monkeypatch, caplog):
@@ -148,10 +153,11 @@ def test_failed_build_means_the_interpreter_and_one_warning(cache, monkeypatch, 
         again, _ = solve("rosenbrock", background=False)  # built once per process
     assert solver.kind == again.kind == INTERPRETED
     np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
-    assert len(caplog.records) == 1
-    assert "not built" in caplog.records[0].message
-    assert caplog.records[0].message.endswith("fatal: out of luck")
-    assert not list(cache.glob("*.so")) and not list(cache.glob("*.tmp"))
+    (message,) = [record.message for record in caplog.records]
+    assert message.startswith("the NLP stays interpreted: nlp_")
+    assert "not built: failing-cc could not compile nlp_" in message
+    assert message.endswith(".c: fatal: out of luck")
+    assert library_cache.entries() == [] and not list(cache.glob(".build-*"))
 
 
 def test_too_big_to_compile_is_remembered(cache, monkeypatch, caplog):
@@ -161,7 +167,7 @@ def test_too_big_to_compile_is_remembered(cache, monkeypatch, caplog):
     assert solver.kind == INTERPRETED
     np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
     assert len(caplog.records) == 1 and "too big to compile" in caplog.records[0].message
-    assert [p.suffix for p in cache.iterdir()] == [".too-big"]
+    assert [entry.name[-8:] for entry in library_cache.entries()] == [".too-big"]
 
     def no_generation(*args):
         raise AssertionError("the C was generated again")
@@ -172,7 +178,7 @@ def test_too_big_to_compile_is_remembered(cache, monkeypatch, caplog):
 
 
 def build_in_child(cache: str, queue: multiprocessing.Queue) -> None:
-    os.environ[compiled.CACHE_ENV] = cache
+    os.environ[library_cache.CACHE_ENV] = cache
     solver, x = solve("rosenbrock concurrent", background=False)
     queue.put((solver.kind, str(solver.library), x.tolist()))
 
@@ -188,7 +194,36 @@ def test_concurrent_builders_leave_one_valid_library(cache):
         worker.join(timeout=60)
     assert {kind for kind, _, _ in results} <= {COMPILED, LOADED}
     assert len({library for _, library, _ in results}) == 1
-    assert [p.name for p in cache.iterdir()] == [os.path.basename(results[0][1])]
+    assert [entry.name for entry in library_cache.entries()] == [os.path.basename(results[0][1])]
+    assert not list(cache.glob(".build-*"))
     loaded, x = solve("rosenbrock concurrent", build=unused)
     assert loaded.kind == LOADED
     np.testing.assert_allclose(x, ROSENBROCK, atol=1e-6)
+
+
+class _BuildsThenFails:
+    """A planner that starts a background build (the test's NLP), then fails."""
+
+    name = "builds-then-fails"
+
+    def plan(self, problem):
+        solver, _ = solve("rosenbrock in the background")
+        assert solver.kind == INTERPRETED
+        raise PlanningError("builds-then-fails: never plans")
+
+
+def test_a_failed_background_build_is_one_line_of_the_command_line(
+    cache, monkeypatch, capsys, tmp_path
+):
+    """The command waits for the build it started, so that its failure (here after the
+    command's own end) reaches stderr, in one line."""
+    monkeypatch.setenv("CC", failing_compiler(cache, seconds=0.5))
+    monkeypatch.setitem(PLANNERS, _BuildsThenFails.name, _BuildsThenFails())
+    problem = str(ROOT / "problems" / "craniotomy_bone_flap.toml")
+    out = str(tmp_path / "plan.csv")
+    status, _ = run_cli(["plan", problem, "--planner", _BuildsThenFails.name, "--out", out])
+    assert status == 1
+    failed, warning = capsys.readouterr().err.splitlines()
+    assert failed == "spm-opt: failed: builds-then-fails: never plans"
+    assert warning.startswith("spm-opt: warning: the NLP stays interpreted: nlp_")
+    assert warning.endswith(".c: fatal: out of luck")

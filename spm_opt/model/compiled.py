@@ -3,17 +3,14 @@
 CasADi's code generator writes the single-sample function; a small C loop around it runs
 it over N samples held in NumPy arrays, split over threads by OpenMP when the compiler has
 it, and ctypes calls that loop on the arrays' own memory (no conversion to CasADi's
-matrices). The shared library is cached on disk under a name made from the hash of its
-source and flags, so a process compiles each function once per machine, not once per run.
+matrices). The shared library is kept in the cache of compiled libraries
+(:mod:`spm_opt.model.library_cache`) under a name made from the hash of its source and
+flags, so a process compiles each function once per machine, not once per run.
 
 Every input and output is a row-major (N, n) float64 array whose row i is sample i's
 vector (an input of shape (n, 1) in CasADi); inputs marked shared are one vector for all
-samples. Without a C compiler :func:`compile_batch` returns ``None`` and callers keep
-CasADi's interpreter.
-
-The compiler lookup, the cache directory and the atomic build (:func:`compiler`,
-:func:`cache_directory`, :func:`build_library`) serve
-:mod:`spm_opt.planners.ocp.nlp_library` too.
+samples. Without a C compiler, or when the build fails, :func:`compile_batch` returns
+``None`` (one warning says why) and callers keep CasADi's interpreter.
 """
 
 from __future__ import annotations
@@ -21,24 +18,17 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import logging
-import os
-import shutil
-import subprocess
-import tempfile
-from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
+
+from spm_opt.model.library_cache import build, compiler, find
 
 _LOG = logging.getLogger(__name__)
 
 FLAGS = ("-O3", "-fPIC", "-shared")
 """Compiler flags; OpenMP (``-fopenmp``) is added when the compiler accepts it."""
-
-CACHE_ENV = "SPM_OPT_CACHE"
-"""Environment variable naming the cache directory (default ``~/.cache/spm_opt``)."""
 
 _LOOP = """
 #include <stdlib.h>
@@ -107,14 +97,11 @@ class BatchFunction:
 
 
 def _source(function: ca.Function) -> str:
-    name = function.name()
-    with tempfile.TemporaryDirectory() as directory:
-        generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-        generator.add(function)
-        generator.generate(directory + os.sep)
-        code = Path(directory, f"{name}.c").read_text()
-    return code + _LOOP.format(
-        name=name,
+    """The C of ``function`` and of its loop over samples."""
+    generator = ca.CodeGenerator(f"{function.name()}.c", {"with_header": False})
+    generator.add(function)
+    return generator.dump() + _LOOP.format(
+        name=function.name(),
         sz_arg=function.sz_arg(),
         sz_res=function.sz_res(),
         sz_iw=function.sz_iw(),
@@ -125,70 +112,24 @@ def _source(function: ca.Function) -> str:
     )
 
 
-def compiler() -> str | None:
-    """The C compiler: ``$CC`` (a program name or path) when set, else ``cc`` or ``gcc`` on
-    the PATH; None when there is none (or ``$CC`` names a missing program)."""
-    chosen = os.environ.get("CC")
-    if chosen:
-        return shutil.which(chosen)
-    return shutil.which("cc") or shutil.which("gcc")
-
-
-def cache_directory() -> Path:
-    """Where compiled libraries are kept: ``$SPM_OPT_CACHE``, else ``~/.cache/spm_opt``."""
-    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "spm_opt")
-
-
-def build_library(compiler: str, source: Path, library: Path, flags: Sequence[str]) -> None:
-    """Compile the C file ``source`` into the shared library ``library`` with ``flags``.
-
-    The compiler writes a temporary file of its own next to ``library``, renamed onto it
-    only when complete: concurrent builders (threads or processes) never see half a file,
-    and the last one to finish leaves a valid library. OSError (with the compiler's last
-    message) when it fails.
-    """
-    library.parent.mkdir(parents=True, exist_ok=True)
-    handle, name = tempfile.mkstemp(dir=library.parent, prefix=library.stem, suffix=".tmp")
-    os.close(handle)
-    partial = Path(name)
-    try:
-        command = [compiler, *flags, str(source), "-o", str(partial), "-lm"]
-        run = subprocess.run(command, capture_output=True, text=True)
-        if run.returncode != 0:
-            last = (run.stderr.strip().splitlines() or ["no message"])[-1]
-            raise OSError(f"{compiler} could not compile {source.name}: {last}")
-        os.replace(partial, library)  # atomic
-    finally:
-        partial.unlink(missing_ok=True)
-
-
-def _build_batch(compiler: str, code: str, library: Path) -> None:
-    """Compile ``code`` into ``library``, with OpenMP when the compiler takes it."""
-    with tempfile.TemporaryDirectory() as directory:
-        source = Path(directory, library.with_suffix(".c").name)
-        source.write_text(code)
-        try:
-            build_library(compiler, source, library, (*FLAGS, "-fopenmp"))
-        except OSError:
-            build_library(compiler, source, library, FLAGS)
-
-
 def compile_batch(function: ca.Function) -> BatchFunction | None:
-    """The function compiled for batches, or None when no C compiler works here."""
+    """The function compiled for batches (from the cache, else built into it), or None,
+    with one warning, when no C compiler works here or the build fails."""
     chosen = compiler()
     if chosen is None:
         _LOG.warning("no C compiler: %s runs in CasADi's interpreter", function.name())
         return None
     code = _source(function)
     key = hashlib.sha256((code + " ".join(FLAGS) + chosen).encode()).hexdigest()[:16]
-    library = cache_directory() / f"{function.name()}_{key}.so"
+    name, symbol = f"{function.name()}_{key}", f"{function.name()}_batch"
     try:
-        if not library.exists():
-            _build_batch(chosen, code, library)
+        library = find(name, [symbol]) or build(
+            name, code, chosen, [(*FLAGS, "-fopenmp"), FLAGS], [symbol]
+        )
         loaded = ctypes.CDLL(str(library))
     except OSError as error:
         _LOG.warning("%s runs in CasADi's interpreter: %s", function.name(), error)
         return None
-    entry = getattr(loaded, f"{function.name()}_batch")
+    entry = getattr(loaded, symbol)
     entry.restype = ctypes.c_int
     return BatchFunction(function, loaded, entry)

@@ -5,15 +5,15 @@ Jacobian and Hessian, :mod:`spm_opt.planners.ocp.assembly`) and an ``assemble`` 
 builds the NLP and its derivative functions from them, in SX or compiled alike.
 :func:`nlp_solver` takes a cheap ``key`` for those functions (the caller's: e.g. a hash of
 the code that builds them) and adds what else makes the binary: CasADi's version, the
-compiler and its flags. When the library is in the cache (``$SPM_OPT_CACHE`` or
-``~/.cache/spm_opt``, as for :mod:`spm_opt.model.compiled`), the functions are loaded from
-it without building their symbolic graph. Otherwise the solver returned runs the SX
-functions in CasADi's interpreter while their C is generated here and compiled in a
-background thread; the :class:`Solver` switches to the library on its first call after the
-library appears, and later calls load it. Without a C compiler, when the build fails, or
-when the C is too big to compile (:data:`MAX_SOURCE_BYTES`), the solver stays interpreted
-and one warning says so. A process that ends during a build waits for it, so that the next
-one finds the library.
+compiler and its flags. When the library is in the cache of compiled libraries
+(:mod:`spm_opt.model.library_cache`) and whole, the functions are loaded from it without
+building their symbolic graph. Otherwise the solver returned runs the SX functions in
+CasADi's interpreter while their C is generated here and compiled in a background thread;
+the :class:`Solver` switches to the library on its first call after the library appears,
+and later calls load it. Without a C compiler, when the build fails, or when the C is too
+big to compile (:data:`MAX_SOURCE_BYTES`), the solver stays interpreted and one warning
+says so. A process that ends during a build waits for it, so that the next one finds the
+library, unless it was interrupted (:func:`spm_opt.model.library_cache.stop_compilers`).
 
 Besides the functions, the library holds the reverse derivatives of the value functions
 (the first, unless the caller names others): CasADi's ``nlpsol`` asks for them when it is
@@ -25,12 +25,11 @@ milliseconds.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
-import shutil
-import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -41,7 +40,7 @@ from typing import Any
 
 import casadi as ca
 
-from spm_opt.model.compiled import build_library, cache_directory, compiler
+from spm_opt.model.library_cache import BuildStopped, build, cache_directory, compiler, find
 
 _LOG = logging.getLogger(__name__)
 
@@ -77,14 +76,15 @@ class Solver:
     seconds : float
         Time it took to make ``function``, s (graph, solver and compiler included).
     library : Path or None
-        The shared library it uses or waits for; None without a compiler.
+        The cache's entry of the library it uses or waits for (a folder); None without a
+        compiler.
     """
 
     function: ca.Function
     kind: str
     seconds: float
     library: Path | None
-    _load: Callable[[], ca.Function] | None = field(default=None, repr=False)
+    _load: Callable[[], ca.Function | None] | None = field(default=None, repr=False)
 
     def __call__(self, **arguments: Any) -> dict[str, ca.DM]:
         """Solve (CasADi's keywords: x0, p, lbx, ...), with the library if it is there."""
@@ -104,13 +104,10 @@ class Solver:
         if self.kind != INTERPRETED or self._load is None or not self.library.exists():
             return
         started = time.perf_counter()
-        try:
-            self.function = self._load()
-        except RuntimeError as error:
-            _LOG.warning("%s does not load, staying interpreted: %s", self.library.name, error)
-        else:
-            self.kind, self.seconds = LOADED, time.perf_counter() - started
-        self._load = None
+        function, self._load = self._load(), None
+        if function is not None:
+            self.function, self.kind = function, LOADED
+            self.seconds = time.perf_counter() - started
 
 
 _builds: dict[Path, Future] = {}  # each library is built at most once per process
@@ -156,33 +153,42 @@ def nlp_solver(
         return Solver(solver, INTERPRETED, time.perf_counter() - started, None)
     library = library_path(chosen, key)
 
-    def load() -> ca.Function:
-        return solver_of([ca.external(function, str(library)) for function in names])
-
-    if library.exists():
+    def load() -> ca.Function | None:
+        """The solver on the library, if it is in the cache and whole."""
+        found = find(library.name, names)
+        if found is None:
+            return None
         try:
-            return Solver(load(), LOADED, time.perf_counter() - started, library)
+            externals = [ca.external(function, str(found)) for function in names]
         except RuntimeError as error:
-            _LOG.warning("%s does not load (%s); building it again", library.name, error)
-            library.unlink(missing_ok=True)
+            _LOG.debug("CasADi cannot load %s: %s", found, error)
+            _LOG.warning("CasADi cannot load %s: the NLP stays interpreted", library.name)
+            return None
+        return solver_of(externals)
+
+    loaded = load()
+    if loaded is not None:
+        return Solver(loaded, LOADED, time.perf_counter() - started, library)
     symbolic = functions()
-    pending = _start_build(chosen, library, symbolic, reversed_)
+    pending = _start_build(chosen, library, symbolic, reversed_, names)
     if pending is not None and not background:
         pending.result()
-        if library.exists():
-            return Solver(load(), COMPILED, time.perf_counter() - started, library)
+        loaded = load()
+        if loaded is not None:
+            return Solver(loaded, COMPILED, time.perf_counter() - started, library)
     solver = uncompiled(lambda: symbolic)
     return Solver(solver, INTERPRETED, time.perf_counter() - started, library, load)
 
 
 def library_path(compiler_path: str, key: str) -> Path:
-    """Where the library for ``key``, compiled by ``compiler_path``, lives."""
+    """The cache's entry (a folder) of the library for ``key``, compiled by
+    ``compiler_path``."""
     identity = json.dumps(
         [key, ca.__version__, compiler_path, BUILD_FLAGS, MAX_SOURCE_BYTES, _FORMAT],
         sort_keys=True,
     )
     digest = hashlib.sha256(identity.encode()).hexdigest()[:16]
-    return cache_directory() / f"nlp_{digest}.so"
+    return cache_directory() / f"nlp_{digest}"
 
 
 def wait_for_builds() -> None:
@@ -193,7 +199,11 @@ def wait_for_builds() -> None:
 
 
 def _start_build(
-    chosen: str, library: Path, functions: list[ca.Function], reversed_: tuple[int, ...]
+    chosen: str,
+    library: Path,
+    functions: list[ca.Function],
+    reversed_: tuple[int, ...],
+    names: tuple[str, ...],
 ) -> Future | None:
     """Generate the C here (CasADi is not thread-safe) and compile it in the build thread,
     unless this process has built or is building ``library``; the build's future (None
@@ -201,60 +211,54 @@ def _start_build(
     with _lock:
         if library in _builds:
             return _builds[library]
-    source = _source(library, functions, reversed_)
-    if source is None:
+    code = _source(library, functions, reversed_)
+    if code is None:
         return None
     with _lock:
-        future = _build_executor().submit(_compile, chosen, source, library)
+        future = _build_executor().submit(_compile, chosen, code, library, names)
         _builds[library] = future
     return future
 
 
-def _source(library: Path, functions: list[ca.Function], reversed_: tuple[int, ...]) -> Path | None:
-    """The C for ``library`` in a new temporary directory; None (with a warning) when it
-    cannot be generated or is too big to compile, which a marker next to the library
-    remembers."""
-    too_big = library.with_suffix(".too-big")
-    if not too_big.exists():
-        directory = Path(tempfile.mkdtemp(prefix="spm_opt_nlp_"))
+def _source(library: Path, functions: list[ca.Function], reversed_: tuple[int, ...]) -> str | None:
+    """The C for ``library``; None (with a warning) when it cannot be generated or is too
+    big to compile, which a marker in the cache remembers."""
+    too_big = library.with_name(f"{library.name}.too-big")
+    try:
+        verdict = too_big.read_text()
+    except OSError:
         try:
-            source = _generate(functions, reversed_, directory, library.stem)
+            code = _generate(functions, reversed_, library.name)
         except RuntimeError as error:
-            shutil.rmtree(directory, ignore_errors=True)
-            _LOG.warning("no C for %s, the NLP stays interpreted: %s", library.name, error)
+            reason = " ".join(str(error).split())  # CasADi's message, in one line
+            _LOG.warning("no C for %s, the NLP stays interpreted: %s", library.name, reason)
             return None
-        size = source.stat().st_size
-        if size <= MAX_SOURCE_BYTES:
-            return source
-        shutil.rmtree(directory, ignore_errors=True)
-        too_big.parent.mkdir(parents=True, exist_ok=True)
-        too_big.write_text(f"its C ({size / 1e6:.0f} MB) is too big to compile")
-    _LOG.warning("%s: %s; the NLP stays interpreted", library.name, too_big.read_text())
+        if len(code) <= MAX_SOURCE_BYTES:
+            return code
+        verdict = f"its C ({len(code) / 1e6:.0f} MB) is too big to compile"
+        with contextlib.suppress(OSError):  # then it is only not remembered
+            too_big.parent.mkdir(parents=True, exist_ok=True)
+            too_big.write_text(verdict)
+    _LOG.warning("%s: %s; the NLP stays interpreted", library.name, verdict)
     return None
 
 
-def _generate(
-    functions: list[ca.Function], reversed_: tuple[int, ...], directory: Path, stem: str
-) -> Path:
-    """The C of ``functions`` and of the reverse derivatives of those at ``reversed_``, in
-    ``directory``."""
+def _generate(functions: list[ca.Function], reversed_: tuple[int, ...], stem: str) -> str:
+    """The C of ``functions`` and of the reverse derivatives of those at ``reversed_``."""
     generator = ca.CodeGenerator(f"{stem}.c")
     for function in [*functions, *(functions[k].reverse(1) for k in reversed_)]:
         generator.add(function)
-    generator.generate(f"{directory}{os.sep}")
-    return directory / f"{stem}.c"
+    return generator.dump()
 
 
-def _compile(chosen: str, source: Path, library: Path) -> None:
-    """The build thread's job: compile, log a failure, remove the source."""
-    started = time.perf_counter()
+def _compile(chosen: str, code: str, library: Path, names: tuple[str, ...]) -> None:
+    """The build thread's job: compile into the cache, or say in one line why not."""
     try:
-        build_library(chosen, source, library, BUILD_FLAGS)
-        _LOG.info("compiled %s in %.1f s", library.name, time.perf_counter() - started)
-    except OSError as error:
-        _LOG.warning("%s not built, the NLP stays interpreted: %s", library.name, error)
-    finally:
-        shutil.rmtree(source.parent, ignore_errors=True)
+        build(library.name, code, chosen, [BUILD_FLAGS], names)
+    except BuildStopped:
+        _LOG.debug("the build of %s was stopped", library.name)
+    except Exception as error:  # else it would stay in the thread's future, unseen
+        _LOG.warning("the NLP stays interpreted: %s", error)
 
 
 def _build_executor() -> ThreadPoolExecutor:
