@@ -159,3 +159,44 @@ def test_a_public_name_stays_what_it_names_when_its_module_is_imported_first():
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert run.stdout.split() == ["True", "True"]
+
+
+BLOCKING_CC = """#!/bin/sh
+case "$*" in *nlp_*) touch "$0.started"; while [ ! -e "$0.release" ]; do sleep 0.05; done;; esac
+exec cc "$@"
+"""
+"""A compiler that holds every optimal-control library's build until released."""
+
+
+def test_sigint_while_the_command_waits_for_a_background_compile(tmp_path):
+    """The plan is written; the command waits for the library it compiles in the
+    background. A Ctrl-C then stops the compiler and ends the command at once."""
+    from test_library_cache import compilers_of, wait_until
+
+    compiler = tmp_path / "blocking-cc"
+    compiler.write_text(BLOCKING_CC)
+    compiler.chmod(0o755)
+    cache, out = tmp_path / "cache", tmp_path / "plan.csv"
+    command = [sys.executable, "-m", "spm_opt.cli", "plan", str(PAPER), "--planner"]
+    command += ["ocp-min-time", "--out", str(out)]
+    environment = {**os.environ, "SPM_OPT_CACHE": str(cache), "CC": str(compiler)}
+    process = subprocess.Popen(
+        command, env=environment, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        written = process.stdout.readline()  # the command's work is done
+        assert written.startswith(f"{out}: ocp-min-time plan"), written
+        assert wait_until(Path(f"{compiler}.started").exists, 60)
+        process.send_signal(signal.SIGINT)
+        status = process.wait(timeout=30)
+    finally:
+        process.kill()
+        Path(f"{compiler}.release").touch()
+    lines = process.stderr.read().splitlines()
+    assert status == 130 and lines == [
+        "spm-opt: interrupted: the command's output stands; the library compiling in the "
+        "background is left for the next run"
+    ]
+    assert out.exists()
+    assert wait_until(lambda: not compilers_of(cache), 5), compilers_of(cache)
+    assert not [entry for entry in cache.iterdir() if entry.name.startswith("nlp_")]
