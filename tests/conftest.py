@@ -15,6 +15,14 @@ PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
 HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tests marked ``real_time`` share one xdist group: they run one at a time (each still
+    beside other tests, as on a busy machine, which they must bear)."""
+    for item in items:
+        if item.get_closest_marker("real_time") is not None:
+            item.add_marker(pytest.mark.xdist_group("real time"))
+
+
 @pytest.fixture(scope="session")
 def paper_problem() -> so.Problem:
     return so.load_problem(PAPER_PROBLEM)

@@ -101,13 +101,16 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
 @pytest.mark.parametrize(
     "command",
     [
-        ["compare_planners.py", "--planners", "cubic,ruckig"],
+        pytest.param(["compare_planners.py", "--planners", "cubic,ruckig"], marks=pytest.mark.slow),
         ["reproduce_paper.py"],
         ["calibrate_prototype.py"],
         ["hardware_verification.py"],
-        ["feed_hold.py", "--holds", "2"],
+        pytest.param(["feed_hold.py", "--holds", "2"], marks=pytest.mark.slow),
         ["executed_cut.py", "--planners", "toppra", "--problems", "craniotomy_hardware"],
-        pytest.param(["hardware_verification.py", "--backend", "emulator"], marks=pytest.mark.slow),
+        pytest.param(
+            ["hardware_verification.py", "--backend", "emulator"],
+            marks=[pytest.mark.slow, pytest.mark.real_time],
+        ),
         pytest.param(["identify_prototype.py", "--fit-seconds", "40"], marks=pytest.mark.slow),
     ],
     ids=lambda c: " ".join(c),

@@ -36,6 +36,8 @@ from spm_opt.execution.plant import PlantSettings
 from spm_opt.model.actuator import ACTUATORS
 from spm_opt.problem import load_problem
 
+pytestmark = pytest.mark.real_time
+
 dynamixel_sdk = pytest.importorskip("dynamixel_sdk")
 
 L54 = ACTUATORS["L54-50-S500-R"]

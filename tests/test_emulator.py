@@ -30,6 +30,8 @@ from spm_opt.execution.plant import PlantSettings, StateTrace
 from spm_opt.execution.protocol import BROADCAST_ID, Instruction, PacketReader, build_instruction
 from spm_opt.model.params import load_robot
 
+pytestmark = pytest.mark.real_time
+
 ROOT = Path(__file__).resolve().parents[1]
 COMM_SUCCESS, COMM_RX_TIMEOUT, COMM_RX_CORRUPT = 0, -3001, -3002
 GOAL_POSITION, PRESENT_POSITION, TORQUE_ENABLE, HARDWARE_ERROR = 596, 611, 562, 892
@@ -372,8 +374,12 @@ def test_the_emulator_records_the_plants_true_state(robot):
         port, ph = connect(emulator.device)
         begin = time.monotonic()
         enable_and_start(port, ph, (2000, -1000))
-        time.sleep(0.6)
-        _, positions = sync_read_positions(port, ph)
+        deadline, positions, previous = time.monotonic() + 60.0, None, None
+        while positions is None or positions != previous:  # read at rest: later when busy
+            assert time.monotonic() < deadline, "the positions read never settled"
+            previous = positions
+            time.sleep(0.1)
+            _, positions = sync_read_positions(port, ph)
         end = time.monotonic()
         port.closePort()
     recorded = trace.arrays()

@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
@@ -18,9 +17,11 @@ from test_execution_faults import assert_the_commanded_stop_kept_its_limits, sto
 
 import spm_opt as so
 from spm_opt.errors import PreflightError
-from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_log
+from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, execute, read_log
 from spm_opt.execution.log import COLUMNS
 from spm_opt.execution.results import LoopStatistics
+
+pytestmark = pytest.mark.real_time
 
 DEG = np.pi / 180.0
 
@@ -121,20 +122,33 @@ def test_a_following_error_ends_in_a_jerk_limited_stop_at_rest(
     assert abs(last["velocity_theta1_rad_s"]) < 0.005 and abs(last["velocity_theta2_rad_s"]) < 0.005
 
 
+class _SignalledAlongThePlan(SimulatedRobot):
+    """The simulated robot on the machine's clock; it sends this process SIGINT once the
+    executor's status shows the plan ``at_plan_s`` along (an event, not a timer: a busy
+    machine only makes it come later)."""
+
+    executor: Executor
+    at_plan_s: float
+    sent = False
+
+    def read(self):  # noqa: ANN201 - the backend's
+        status = self.executor.status
+        if not self.sent and status is not None and status.plan_time_s >= self.at_plan_s:
+            self.sent = True
+            os.kill(os.getpid(), signal.SIGINT)
+        return super().read()
+
+
 def test_sigint_ends_in_a_safe_stop(hardware_problem, hardware_plan, tmp_path):
-    robot = SimulatedRobot(
+    robot = _SignalledAlongThePlan(
         hardware_problem.robot, start_rad=hardware_plan.position(0.0), realtime=True
     )
-    timer = threading.Timer(1.5, os.kill, (os.getpid(), signal.SIGINT))
-    timer.start()
-    try:
-        result = execute(hardware_plan, robot, hardware_problem, tmp_path / "run.csv")
-    finally:
-        timer.cancel()
+    robot.executor, robot.at_plan_s = Executor(hardware_problem, robot), 1.5
+    result = robot.executor.run(hardware_plan, tmp_path / "run.csv")
     assert result.reason == "interrupted (SIGINT)" and result.at_rest
     table, _ = read_log(tmp_path / "run.csv")
-    plan_times = table.loc[table["phase"] == "plan", "time_s"]
-    assert 1.0 < plan_times.max() - plan_times.min() < 0.5 * hardware_plan.duration
+    plan_times = table.loc[table["phase"] == "plan", "plan_time_s"]
+    assert 1.5 <= plan_times.max() < 0.5 * hardware_plan.duration
     _stop_is_jerk_limited(table, hardware_problem, hardware_plan)
 
 

@@ -208,6 +208,7 @@ class Operator(threading.Thread):
 
 
 @pytest.mark.slow
+@pytest.mark.real_time
 def test_three_holds_and_two_overrides_through_the_sdk_and_the_emulator(
     hardware_problem, hardware_plan, tmp_path
 ):

@@ -20,6 +20,8 @@ from spm_opt.model.base_parameters import base_parameters
 from spm_opt.model.params import load_robot
 from spm_opt.model.regressor import standard_parameters
 
+pytestmark = pytest.mark.real_time
+
 ROOT = Path(__file__).resolve().parents[1]
 IDENTIFICATION = ROOT / "problems" / "identification.toml"
 MODEL = ROOT / "problems" / "robots" / "prototype.toml"

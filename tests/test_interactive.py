@@ -19,6 +19,8 @@ from conftest import HARDWARE_PROBLEM
 import spm_opt as so
 from spm_opt.execution import read_log
 
+pytestmark = pytest.mark.real_time
+
 
 class Terminal:
     """A command on a pseudo-terminal; collects everything it writes."""

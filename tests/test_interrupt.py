@@ -16,6 +16,8 @@ import pytest
 
 from spm_opt.interrupt import solve
 
+pytestmark = pytest.mark.real_time
+
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
 IDENTIFICATION = ROOT / "problems" / "identification.toml"

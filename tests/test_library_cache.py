@@ -235,6 +235,7 @@ else:
 
 
 @pytest.mark.skipif(not Path("/proc/self/cmdline").exists(), reason="needs /proc")
+@pytest.mark.real_time
 @pytest.mark.parametrize(
     "where, stop", [("main", signal.SIGKILL), ("thread", signal.SIGKILL), ("main", signal.SIGINT)]
 )

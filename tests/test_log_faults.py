@@ -37,6 +37,8 @@ from spm_opt.errors import PreflightError
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
 from spm_opt.execution.log import COLUMNS, LogWriter
 
+pytestmark = pytest.mark.real_time
+
 DEG = np.pi / 180.0
 SETTINGS = ExecutionSettings(approach=True, log_stall_s=0.2)
 ARM_AT_PLAN_S = 1.5

@@ -156,7 +156,7 @@ class KeyReader:
 
     def __enter__(self) -> KeyReader:
         self._saved = termios.tcgetattr(self._fd)
-        tty.setcbreak(self._fd)
+        tty.setcbreak(self._fd, termios.TCSANOW)  # TCSAFLUSH would drop keys typed already
         self._thread.start()
         return self
 
@@ -200,9 +200,9 @@ def console(
     """The live view on ``stderr`` if it is a terminal, and the keys from ``keys_fd`` (a
     terminal, or None for no keys), for the block's run."""
     with contextlib.ExitStack() as stack:
-        if keys_fd is not None:
-            stderr.write(KEYS_HELP + "\n")
+        if keys_fd is not None:  # the keys are read before they are offered
             stack.enter_context(KeyReader(executor, keys_fd))
+            stderr.write(KEYS_HELP + "\n")
         if stderr.isatty():
             stack.enter_context(LiveView(executor, ContourProgress(problem, trajectory), stderr))
         yield

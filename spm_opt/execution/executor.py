@@ -325,14 +325,12 @@ class Executor:
             "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
         preflight.check_log_room(log_path, self._longest_run_s(trajectory, approach), header)
-        self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
         self._writer = LogWriter(
-            log_path,
-            {**header, "clock_origin_s": self._ticker.origin},
-            settings.flush_interval_s,
-            settings.log_stall_s,
-            self._log_write,
+            log_path, header, settings.flush_interval_s, settings.log_stall_s, self._log_write
         )
+        # the loop starts now, with its log's files written (the header's origin follows)
+        self._ticker = _Ticker(self.backend.clock, 1.0 / settings.rate_hz)
+        self._writer.note({"clock_origin_s": self._ticker.origin})
         self._feed_events, self._pace = [], None
         self._plan_duration = trajectory.duration
         at = first.position_rad.copy()
