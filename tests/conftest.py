@@ -2,6 +2,7 @@
 hardware verification (Section 6) with its cubic plan, and the check of every figure a
 test saves."""
 
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,14 @@ import spm_opt as so
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
 HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The tests of Ctrl-C need SIGINT to reach this process and those it starts: a run
+    started in the background by a shell, which ignores SIGINT there (and so would every
+    process it starts), gets Python's own handler back."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

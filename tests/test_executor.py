@@ -163,7 +163,7 @@ def test_kill_9_leaves_a_valid_log_of_every_flushed_sample(hardware_plan, tmp_pa
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not log.exists() or log.stat().st_size < 20_000):
         time.sleep(0.05)
-    time.sleep(0.37)
+    flushed = log.read_bytes().count(b"\n") - 1  # samples on the disk, whenever that is
     process.send_signal(signal.SIGKILL)
     process.wait()
     text = log.read_text()
@@ -171,7 +171,7 @@ def test_kill_9_leaves_a_valid_log_of_every_flushed_sample(hardware_plan, tmp_pa
     table = pd.read_csv(log)
     assert list(table.columns) == list(COLUMNS)
     assert table.notna().sum().min() == len(table)  # every line whole, every cell there
-    assert len(table) > 200
+    assert len(table) >= flushed > 50
     assert np.all(np.diff(table["time_s"]) > 0)
     header = json.loads(log.with_suffix(".json").read_text())
     assert "completed" not in header  # the run never ended: the header is the start one
