@@ -38,7 +38,8 @@ EXIT_STATUSES = {
     "run ended in a safe stop (execute)",
     2: "bad input: one line 'spm-opt: error: ...' names the field and what is allowed "
     "(a missing optional package too); nothing is written",
-    130: "interrupted by Ctrl-C (SIGINT): nothing is written",
+    130: "interrupted by Ctrl-C (SIGINT): one line, and nothing is written (unless the "
+    "command had written its output and waited for a background compile: the line says so)",
 }
 """Every exit status of ``spm-opt`` and what it means."""
 

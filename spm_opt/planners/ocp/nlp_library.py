@@ -194,7 +194,9 @@ def library_path(compiler_path: str, key: str) -> Path:
 def wait_for_builds() -> None:
     """Wait until every build this process started has finished (or failed)."""
     with _lock:
-        pending = list(_builds.values())
+        pending = [build for build in _builds.values() if not build.done()]
+    if pending:
+        _LOG.info("waiting for the libraries compiling in the background (%d)", len(pending))
     wait(pending)
 
 
