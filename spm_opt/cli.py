@@ -869,8 +869,6 @@ def _run(args: argparse.Namespace) -> int:
         where = f"{error.filename}: " if error.filename else ""
         print(f"spm-opt: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return _interrupted()
     return 0
 
 

@@ -147,10 +147,10 @@ class LogWriter:
             self._reserve.unlink(missing_ok=True)
             raise
         self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
-        self._size = os.fstat(self._fd).st_size  # bytes of whole lines in the file
+        self._first_bytes = os.fstat(self._fd).st_size  # the columns' line
         self._queue: collections.deque[bytes] = collections.deque()
         self._queued_bytes = 0  # the control thread's count
-        self._written_bytes = 0  # the writer's count
+        self._written_bytes = 0  # the writer's count (of whole lines, in order)
         self._chunks: collections.deque[bytes] = collections.deque()  # the writer's own
         self._written_lines = 0
         self._fault: str | None = None
@@ -266,7 +266,6 @@ class LogWriter:
                 except OSError as error:
                     self._fail(f"cannot write {self.path.name}", error)
                     done = self._cut_to_whole_lines(chunk, done)
-            self._size += done
             self._written_lines += chunk.count(b"\n", 0, done)
             self._written_bytes += done
             if done < len(chunk):
@@ -280,7 +279,7 @@ class LogWriter:
         whole = chunk.rfind(b"\n", 0, done) + 1
         if whole < done:
             try:
-                os.ftruncate(self._fd, self._size + whole)
+                os.ftruncate(self._fd, self._first_bytes + self._written_bytes + whole)
             except OSError as error:
                 self._fail(f"cannot cut {self.path.name} back to its last whole line", error)
                 return done
