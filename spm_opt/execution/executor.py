@@ -59,7 +59,7 @@ from spm_opt.execution.backend import (
 from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace, feed_ceiling
 from spm_opt.execution.log import LogWriter, Write
 from spm_opt.execution.preflight import degrees
-from spm_opt.execution.realtime import frozen_heap
+from spm_opt.execution.realtime import frozen_heap, raised_priority
 from spm_opt.execution.rest import FeedHoldWatch, RestWindow
 from spm_opt.execution.results import ExecutionResult, LoopStatistics, RunStatus, StopReport
 from spm_opt.execution.settings import ExecutionSettings
@@ -294,7 +294,8 @@ class Executor:
             measured = backend.read()
             start = trajectory.position(trajectory.start_time)
             approach = self._approach(measured.position_rad, start)
-            with frozen_heap():
+            with frozen_heap(), raised_priority() as nice:
+                header = {**header, "control_thread_nice": nice}
                 return self._run_connected(trajectory, approach, measured, log_path, header)
         finally:
             backend.close()

@@ -19,7 +19,7 @@ import numpy as np
 from spm_opt.execution.emulator.faults import Faults
 from spm_opt.execution.emulator.server import Emulator
 from spm_opt.execution.plant import PlantSettings, StateTrace
-from spm_opt.execution.realtime import frozen_heap
+from spm_opt.execution.realtime import frozen_heap, raised_priority
 from spm_opt.model.params import Robot
 
 DEFAULT_ROBOT = Path(__file__).resolve().parents[3] / "problems" / "robots" / "prototype.toml"
@@ -59,7 +59,9 @@ def serve(
         trace = None if trace_path is None else StateTrace()
         emulator = Emulator(robot, ids, start_rad, faults, PlantSettings(seed=seed), trace=trace)
         try:
-            with frozen_heap():  # before the device is announced: collecting takes time
+            # before the device is announced: collecting takes time; the plant stands for
+            # hardware that never waits for a core, so it asks for the loop's priority too
+            with frozen_heap(), raised_priority():
                 announce(emulator.device)
                 emulator.serve_forever(stop)
         finally:
