@@ -251,7 +251,8 @@ def _parser() -> argparse.ArgumentParser:
     evaluate.add_argument(
         "--other-problem",
         action="store_true",
-        help="judge a log under PROBLEM though it ran under another (default: refused)",
+        help="judge a plan or a log under PROBLEM though it was made for (ran under) another, "
+        "or records none (default: refused)",
     )
     cache = commands.add_parser(
         "cache", help="the cache of compiled libraries: what it holds, or clear it"
@@ -614,7 +615,6 @@ def _evaluate(args: argparse.Namespace) -> None:
     from spm_opt.evaluate import evaluate
     from spm_opt.evaluate_execution import evaluate_log, is_execution_log
     from spm_opt.problem import load_problem
-    from spm_opt.trajectory import Trajectory
 
     problem = load_problem(args.problem)
     if is_execution_log(args.trajectory):
@@ -623,11 +623,9 @@ def _evaluate(args: argparse.Namespace) -> None:
         )
         judged = {"measured": reports.measured, "true": reports.true}
     else:
-        trajectory = Trajectory.from_csv(args.trajectory)
-        for option, given in (("--trace", args.trace), ("--other-problem", args.other_problem)):
-            if given:
-                raise InputError(f"{option}: only with an execution log, not a trajectory CSV")
-        judged = {"planned": evaluate(problem, trajectory)}
+        if args.trace:
+            raise InputError("--trace: only with an execution log, not a trajectory CSV")
+        judged = {"planned": evaluate(problem, args.trajectory, other_problem=args.other_problem)}
     judged = {name: report for name, report in judged.items() if report is not None}
     if len(judged) == 1:
         (report,) = judged.values()

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import logging
 import weakref
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -39,11 +40,14 @@ from spm_opt.limits import ROBOT, RULES, contour_tube, path_tolerance
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
+from spm_opt.provenance import check_plan_made_for
 from spm_opt.report.markdown import markdown_table
 from spm_opt.skull.depth import depth_rates
 from spm_opt.trajectory import Trajectory
 
 DEFAULT_RATE_HZ = 1000.0
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -207,7 +211,11 @@ def evaluate(
     rate_hz : float
         Sampling rate of the evaluation grid, Hz (default 1 kHz; a log keeps its own).
     other_problem : bool
-        Judge a log under ``problem`` though it ran under another.
+        Judge a plan file or a log under ``problem`` though it was made for (ran under)
+        another, or records none; without it, either is refused with a one-line
+        :class:`~spm_opt.errors.InputError` (:mod:`spm_opt.provenance`). A
+        :class:`Trajectory` object is judged under whatever problem it is given (code
+        may judge a plan under tighter limits on purpose).
     """
     if isinstance(trajectory, str | Path):
         from spm_opt import evaluate_execution  # it builds on this module
@@ -216,7 +224,8 @@ def evaluate(
             return evaluate_execution.evaluate_log(
                 problem, trajectory, other_problem=other_problem
             ).measured
-        trajectory = Trajectory.from_csv(trajectory)
+        path, trajectory = trajectory, Trajectory.from_csv(trajectory)
+        _check_plan(problem, trajectory, other_problem, f"plan {path} refused")
     landmark_times = trajectory.landmark_times
     inputs = (rate_hz, None if landmark_times is None else tuple(landmark_times))
     known = _MEASURED.get(trajectory)
@@ -226,6 +235,21 @@ def evaluate(
     report = _measure(problem, trajectory, rate_hz)
     _MEASURED[trajectory] = (problem, inputs, report)
     return copy.deepcopy(report)
+
+
+def _check_plan(
+    problem: Problem, trajectory: Trajectory, other_problem: bool, refused: str
+) -> None:
+    """Refuse a plan made for another problem unless ``other_problem``; warn when let
+    through."""
+    why = check_plan_made_for(problem, trajectory, other_problem, refused)
+    if why:
+        _LOG.warning(
+            "%s: %s; judged under %s's limits as asked",
+            refused.removesuffix(" refused"),
+            why,
+            problem.name,
+        )
 
 
 @dataclass(frozen=True)

@@ -100,6 +100,21 @@ def check_made_for(
     return why
 
 
+def check_plan_made_for(
+    problem: Problem,
+    trajectory: Trajectory,
+    other_problem: bool,
+    refused: str = "plan refused",
+    error: type[InputError] = InputError,
+) -> str:
+    """:func:`check_made_for` of a plan: refuse ``trajectory`` unless its metadata records
+    ``problem`` or ``other_problem``; returns why it was let through ("" if it is
+    ``problem``'s)."""
+    return check_made_for(
+        problem, trajectory.metadata, "plan", other_problem, refused, PLAN_HINT, error
+    )
+
+
 def check_run_of(trajectory: Trajectory, plan: str, header: Mapping[str, Any], log: str) -> None:
     """Refuse a log whose header records a run of another plan than ``trajectory``.
 

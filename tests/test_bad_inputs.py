@@ -142,9 +142,15 @@ def test_shipped_inputs_succeed(tmp_path: Path, capsys: pytest.CaptureFixture[st
     trajectory.write_text(HEADER + GOOD_ROWS, encoding="utf-8")
     status, _ = run_cli(["evaluate", str(problem), str(trajectory)])
     captured = capsys.readouterr()
-    # read and judged: the hand-made motion breaks limits (exit 1), it is not bad input (2)
+    # a plan that records no problem is refused, as execute refuses it ...
+    assert status == 2 and "records no problem" in captured.err
+    status, _ = run_cli(["evaluate", str(problem), str(trajectory), "--other-problem"])
+    captured = capsys.readouterr()
+    # ... and read and judged when asked: the hand-made motion breaks limits (exit 1)
     assert status == 1, captured.err
-    assert captured.err.startswith("spm-opt: the planned cut: ")
+    warning, verdict = captured.err.splitlines()
+    assert warning.startswith("spm-opt: warning: plan ") and "records no problem" in warning
+    assert verdict.startswith("spm-opt: the planned cut: ")
 
 
 # --- bad problem and robot files, through `spm-opt plan` -----------------------------------

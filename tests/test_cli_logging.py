@@ -74,12 +74,12 @@ def chatty_evaluator(monkeypatch: pytest.MonkeyPatch) -> None:
     """The evaluator, logging one line at each level before it measures."""
     evaluate = EVALUATOR.evaluate
 
-    def chatty(problem, trajectory):  # noqa: ANN001, ANN202
+    def chatty(problem, trajectory, **options):  # noqa: ANN001, ANN003, ANN202
         log = logging.getLogger("spm_opt.evaluate")
         log.debug("debug line")
         log.info("info line")
         log.warning("warning line")
-        return evaluate(problem, trajectory)
+        return evaluate(problem, trajectory, **options)
 
     monkeypatch.setattr(EVALUATOR, "evaluate", chatty)
 

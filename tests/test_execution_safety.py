@@ -45,10 +45,11 @@ from test_execution_faults import (
 from test_interactive import Terminal
 
 import spm_opt as so
-from spm_opt.errors import PreflightError, RunInterrupted
+from spm_opt.errors import InputError, PreflightError, RunInterrupted
 from spm_opt.execution import Executor, SimulatedRobot, execute, preflight, read_log
 from spm_opt.execution.dynamixel import DynamixelRobot
 from spm_opt.execution.emulator import DelayReplies, Faults, Overload
+from spm_opt.provenance import check_plan_made_for
 
 pytestmark = pytest.mark.real_time
 
@@ -222,9 +223,9 @@ def test_the_fingerprint_is_what_the_plan_depends_on_not_the_files_bytes(tmp_pat
     for changed in (slower, moved):
         assert so.load_problem(changed).fingerprint != reference.fingerprint
     plan = so.plan(reference, "cubic")
-    preflight.check_made_for(so.load_problem(same), plan, other_problem=False)
-    with pytest.raises(PreflightError, match="made for craniotomy_hardware"):
-        preflight.check_made_for(so.load_problem(slower), plan, other_problem=False)
+    check_plan_made_for(so.load_problem(same), plan, other_problem=False)
+    with pytest.raises(InputError, match="made for craniotomy_hardware"):
+        check_plan_made_for(so.load_problem(slower), plan, other_problem=False)
 
 
 def test_a_plan_without_a_sidecar_runs_only_when_asked_for(plan_csv, tmp_path, capsys):

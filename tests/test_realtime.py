@@ -21,4 +21,3 @@ def test_the_thread_runs_at_the_loops_priority_where_allowed_and_returns_to_its_
         if os.geteuid() == 0:
             assert inside == min(CONTROL_NICE, before)
     assert niceness() == before
-

@@ -85,7 +85,9 @@ def check_plan(
     other_problem : bool
         Run a plan made for another problem, or recording none, under ``problem``'s limits.
     """
-    allowed = check_made_for(problem, trajectory, other_problem)
+    allowed = provenance.check_plan_made_for(
+        problem, trajectory, other_problem, error=PreflightError
+    )
     check_at_rest(trajectory, limits, period_s)
     report = evaluate(problem, trajectory)
     broken = [v for v in report.violations if RULES[v.rule].judges == ROBOT]
@@ -103,21 +105,6 @@ def check_plan(
         raise PreflightError(f"plan refused: {outside} (use --tracking none, or plan slower)")
     if allowed:
         _LOG.warning("%s; run under %s's limits as asked (--other-problem)", allowed, problem.name)
-
-
-def check_made_for(problem: Problem, trajectory: Trajectory, other_problem: bool) -> str:
-    """Refuse a plan whose metadata does not record ``problem``'s fingerprint, unless
-    ``other_problem`` (:func:`spm_opt.provenance.check_made_for`); returns why it was
-    allowed all the same ("" if it is ``problem``'s)."""
-    return provenance.check_made_for(
-        problem,
-        trajectory.metadata,
-        "plan",
-        other_problem,
-        refused="plan refused",
-        hint=provenance.PLAN_HINT,
-        error=PreflightError,
-    )
 
 
 def rest_bounds(limits: JointLimits, period_s: float) -> tuple[float, float]:
