@@ -29,7 +29,7 @@ import logging
 import weakref
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -120,6 +120,14 @@ class Report:
     max_depth_speed_mm_s: float | None = None
     max_depth_acceleration_mm_s2: float | None = None
 
+    _NOT_IN_TABLE: ClassVar[tuple[str, ...]] = (
+        "planner",
+        "violations",
+        "landmark_errors_mm",
+        "contour_judged",
+    )
+    """Fields the markdown's table leaves out (shown otherwise, or not at all)."""
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON; violations as dicts."""
         data = asdict(self)
@@ -130,7 +138,7 @@ class Report:
         """The report as a two-column markdown table, then the violations."""
         rows = [("planner", self.planner or "(unknown)")]
         for key, value in self.to_dict().items():
-            if key in ("planner", "violations", "landmark_errors_mm", "contour_judged"):
+            if key in self._NOT_IN_TABLE:
                 continue
             rows.append((key, _format(value)))
         for visit in self.landmark_errors_mm:
@@ -340,6 +348,7 @@ def judge(
     feed: np.ndarray | None = None,
     between_samples: bool = False,
     contour_judged: bool = True,
+    unjudged: frozenset[str] = frozenset(),
 ) -> Report:
     """Judge a sampled motion by every rule of :data:`spm_opt.limits.RULES`: the one
     judgement of a plan and of an executed run.
@@ -366,6 +375,9 @@ def judge(
         distance to the straight segments from the nearest sample to its neighbours.
     contour_judged : bool
         False: the cut's figures are measured, not judged (an excitation plan).
+    unjudged : frozenset of str
+        Rules left out: their figures are measured, not judged (an executed run's rules
+        whose limits its readings cannot resolve).
     """
     robot, limits, contour = problem.robot, problem.limits, problem.contour
     t, q, qd, qdd, jerk = motion.t, motion.q, motion.qd, motion.qdd, motion.jerk
@@ -455,7 +467,11 @@ def judge(
     checks.upper("coverage", "coverage", np.array([gap / MM]), path / MM, np.array([gap_time]))
     checks.upper("backtracking", "backtracking", backtrack / MM, path / MM)
     checks.lower("singularity margin", "singularity margin", margins, robot.min_singularity_margin)
-    violations = [v for v in checks.found if contour_judged or RULES[v.rule].judges == ROBOT]
+    violations = [
+        v
+        for v in checks.found
+        if (contour_judged or RULES[v.rule].judges == ROBOT) and v.rule not in unjudged
+    ]
 
     return Report(
         planner=planner,

@@ -19,24 +19,18 @@ judgement, against the problem's full contour tolerance:
   1 does not tighten the limit: the problem's limit is what protects the cut, and a robot
   coming to rest in a hold, at a feed near 0, would break any limit scaled by it.
 - **The robot** from the measured motion: joint range, speed (the measured velocity),
-  acceleration and jerk, torque and current (the measured current and the torque the
-  current map gives for it), singularity margin. Acceleration and jerk are the first and
-  second derivatives of the measured velocity by a quadratic Savitzky–Golay filter, over
-  :data:`ACCELERATION_SPAN_S` and :data:`JERK_SPAN_S` (5 and 11 samples at 100 Hz), on a
-  uniform grid at the loop's period (the velocity interpolated there where a row is late
-  or missing). A quadratic filter's derivatives are weighted averages of the true ones
-  with positive weights, so smoothing never raises a peak (a cubic one over 0.1 s overshot the
-  toppra plan's 9.91 rad/s² by 2 %): it rounds short peaks off instead (that plan of
-  ``craniotomy_hardware.toml``, logged as planned at 100 Hz, peaks at 9.91 rad/s² and
-  97.4 rad/s³; planned: 9.91 and 98.7). The noise floor: the velocity's quantum
-  (0.00199234 rpm) leaves at most 0.0063 rad/s² and 0.20 rad/s³ (the filters' gains on
-  half a quantum), RMS 0.0019 and 0.041 for an even rounding error; on the simulated robot
-  driving ``prototype_plant.toml`` at 100 Hz (that problem's toppra, ruckig and cubic
-  plans), the smoothed measured derivatives differ from the same filters on the plant's
-  true velocity by at most 0.006 rad/s² and 0.15 rad/s³, RMS 0.002 and 0.04. (Second and
-  third differences of the position, quantised to 2π/361,384 rad, would move by 0.17
-  rad/s² and 17 rad/s³ per pulse.) A step in acceleration shows as jerk: a log's
-  ``max_acceleration_step_rad_s2`` is None.
+  acceleration and jerk (the measured velocity's derivatives by Savitzky–Golay filters:
+  :mod:`spm_opt.log_estimates`), torque and current (the measured current and the torque
+  the current map gives for it), singularity margin. A step in acceleration shows as jerk:
+  a log's ``max_acceleration_step_rad_s2`` is None. On the simulated robot driving
+  ``prototype_plant.toml`` at 100 Hz (that problem's toppra, ruckig and cubic plans), the
+  measured derivatives differ from the same filters on the plant's true velocity by at
+  most 0.006 rad/s² and 0.15 rad/s³, RMS 0.002 and 0.04.
+- **At the readings' resolution.** The report states how finely the readings resolve each
+  judged figure (:class:`~spm_opt.log_estimates.Resolution`: half a unit of the reading,
+  carried through the filters and the kinematics). A rule whose limit is not above that
+  resolution is not judged, and the report says so; the true state's report has no such
+  limit.
 - **Tracking:** the measured position less the reference (the plan at the logged plan
   time), its largest magnitude and RMS per joint over the plan phase.
 
@@ -60,7 +54,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.signal import savgol_filter
 
 from spm_opt.errors import InputError
 from spm_opt.evaluate import Motion, Report, judge
@@ -74,17 +67,17 @@ from spm_opt.input_limits import (
     read_execution_log,
 )
 from spm_opt.limits import contour_tube, path_tolerance
-from spm_opt.model.params import DEG
+from spm_opt.log_estimates import (
+    ACCELERATION_SPAN_S,
+    JERK_SPAN_S,
+    Resolution,
+    log_resolution,
+    smoothed_derivatives,
+    unresolved_rules,
+)
+from spm_opt.model.params import DEG, MM
 from spm_opt.problem import Problem
 from spm_opt.provenance import check_made_for, log_hint
-
-ACCELERATION_SPAN_S = 0.04
-JERK_SPAN_S = 0.1
-"""Spans of the Savitzky–Golay filters that give acceleration and jerk, s, from the first
-sample to the last (an odd number of samples: 5 and 11 at 100 Hz)."""
-
-ORDER = 2
-"""Polynomial order of the Savitzky–Golay filters."""
 
 FEED_SPAN_S = 0.1
 """How long a fall of the feed takes to lower the feed in force, s."""
@@ -124,6 +117,12 @@ class ExecutionReport(Report):
         the plan phase.
     smoothing_spans_s : list of float, s
         The spans of the filters that gave acceleration and jerk.
+    resolution : dict or None
+        How finely the readings resolve each judged figure (:class:`Resolution`'s
+        fields); None for the plant's true state, which has no rounding.
+    not_judged : list of str
+        The rules left out because the readings cannot resolve their limits, each with
+        why.
     """
 
     angles: str = "measured"
@@ -136,6 +135,10 @@ class ExecutionReport(Report):
     smoothing_spans_s: list[float] = field(
         default_factory=lambda: [ACCELERATION_SPAN_S, JERK_SPAN_S]
     )
+    resolution: dict[str, float] | None = None
+    not_judged: list[str] = field(default_factory=list)
+
+    _NOT_IN_TABLE = (*Report._NOT_IN_TABLE, "resolution", "not_judged")
 
     def _notes(self) -> list[str]:
         notes = super()._notes()
@@ -147,7 +150,22 @@ class ExecutionReport(Report):
             notes.append(f"The run did not complete ({self.outcome}).")
         if self.failed_reads_skipped:
             notes.append(f"{self.failed_reads_skipped} row(s) whose read failed are left out.")
+        if self.resolution is not None:
+            notes.append(_resolution_line(self.resolution))
+        notes += [f"Not judged, {why}." for why in self.not_judged]
         return notes
+
+
+def _resolution_line(resolution: dict[str, float]) -> str:
+    """The readings' resolution, as one sentence."""
+    r = Resolution(**resolution)
+    return (
+        "Resolution of the readings (±): "
+        f"angle {r.position_deg:.2g} deg, speed {r.speed_rad_s:.2g} rad/s, "
+        f"acceleration {r.acceleration_rad_s2:.2g} rad/s^2, jerk {r.jerk_rad_s3:.2g} rad/s^3, "
+        f"current {r.current_a * 1000:.3g} mA, torque {r.torque_nm:.2g} N*m, "
+        f"tool speed {r.tool_speed_mm_s:.2g} mm/s, cut {r.cut_mm:.2g} mm."
+    )
 
 
 @dataclass(frozen=True)
@@ -233,33 +251,6 @@ def tracking_error(angles: np.ndarray, reference: np.ndarray) -> tuple[list[floa
     return np.max(np.abs(error), axis=0).tolist(), np.sqrt(np.mean(error**2, axis=0)).tolist()
 
 
-def smoothed_derivatives(
-    t: np.ndarray, rate: np.ndarray, period_s: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The first and second derivatives (N, k) of rates (N, k) sampled at times t (N,), s:
-    quadratic Savitzky–Golay filters over :data:`ACCELERATION_SPAN_S` and
-    :data:`JERK_SPAN_S` on a uniform grid at ``period_s`` (s; the rates interpolated onto
-    it), read back at t."""
-    count = int(np.floor((t[-1] - t[0]) / period_s + 0.5)) + 1
-    grid = t[0] + period_s * np.arange(count)
-    uniform = np.column_stack([np.interp(grid, t, column) for column in rate.T])
-    derivatives = []
-    # at the ends, the rate held (acceleration) and the end window's own fit (jerk): each
-    # still a positive average of the true derivative, as in the middle
-    for order, span, mode in ((1, ACCELERATION_SPAN_S, "nearest"), (2, JERK_SPAN_S, "interp")):
-        width = max(2 * int(round(span / period_s / 2.0)) + 1, ORDER + 1)
-        if count < width:
-            raise InputError(
-                f"only {t[-1] - t[0]:.3f} s from the plan's start to the log's end: the "
-                f"judge smooths over {width} samples at {1.0 / period_s:g} Hz"
-            )
-        smooth = savgol_filter(
-            uniform, width, ORDER, deriv=order, delta=period_s, axis=0, mode=mode
-        )
-        derivatives.append(np.column_stack([np.interp(t, grid, c) for c in smooth.T]))
-    return derivatives[0], derivatives[1]
-
-
 def _judge(
     problem: Problem,
     run: _Run,
@@ -273,16 +264,23 @@ def _judge(
     qdd, jerk = smoothed_derivatives(run.t, qd, run.period_s)
     header = run.header
     plan = header.get("plan") or {}
+    tube = contour_tube(problem, executed=True)  # the reserve is the executed cut's
+    path = path_tolerance(problem, executed=True)
+    resolution, unresolved = None, {}
+    if angles == "measured":
+        resolution = log_resolution(problem, q, run.period_s)
+        unresolved = unresolved_rules(resolution, _judged_limits(problem, tube, path))
     report = judge(
         problem,
         Motion(run.t, q, qd, qdd, jerk, torque, current),
-        contour_tube(problem, executed=True),  # the reserve is the executed cut's
-        path_tolerance(problem, executed=True),
+        tube,
+        path,
         planner=plan.get("planner"),
         duration=float(run.t[-1] - run.t[0]),
         feed=run.feed,
         between_samples=True,
         contour_judged=not plan.get("ignores_contour", False),
+        unjudged=frozenset(unresolved),
     )
     largest, rms = tracking_error(q[run.in_plan], run.reference[run.in_plan])
     completed = bool(header.get("completed", False))
@@ -299,7 +297,28 @@ def _judge(
         failed_reads_skipped=run.skipped,
         max_tracking_error_deg=largest,
         rms_tracking_error_deg=rms,
+        resolution=None if resolution is None else resolution.to_dict(),
+        not_judged=list(unresolved.values()),
     )
+
+
+def _judged_limits(problem: Problem, tube: float | None, path: float) -> dict[str, float | None]:
+    """The smallest limit of each rule judged on an estimate from the readings, in the
+    rule's unit (None: not limited)."""
+    limits, actuator = problem.limits, problem.robot.actuator
+    tool_speed = limits.max_tool_speed
+    return {
+        "joint speed": limits.max_joint_speed,
+        "joint acceleration": limits.max_joint_acceleration,
+        "joint jerk": limits.max_joint_jerk,
+        "actuator torque": float(np.min(problem.max_joint_torque)),
+        "motor current": actuator.continuous_current_a,
+        "tool speed": None if tool_speed is None else tool_speed / MM,
+        "contour deviation": None if tube is None else tube / MM,
+        "landmark visit": path / MM,
+        "coverage": path / MM,
+        "backtracking": path / MM,
+    }
 
 
 def _read_run(path: Path, problem: Problem, other_problem: bool) -> _Run:

@@ -20,14 +20,10 @@ from test_evaluate import meridian_problem
 
 import spm_opt as so
 from spm_opt.errors import InputError
-from spm_opt.evaluate_execution import (
-    ExecutionReport,
-    evaluate_log,
-    is_execution_log,
-    smoothed_derivatives,
-)
+from spm_opt.evaluate_execution import ExecutionReport, evaluate_log, is_execution_log
 from spm_opt.execution.log import LogWriter
 from spm_opt.execution.plant import StateTrace
+from spm_opt.log_estimates import smoothed_derivatives
 from spm_opt.model import dynamics
 from spm_opt.model.params import DEG, MM
 
