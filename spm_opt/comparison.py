@@ -8,6 +8,7 @@ A planner that fails gets a row with its error; the others still run.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from spm_opt.planners import contour_planners, get_planner, plan
 from spm_opt.problem import Problem
 from spm_opt.report.columns import COLUMN, COLUMNS
 from spm_opt.report.markdown import markdown_table
+from spm_opt.report.planner_style import contour_tubes
 from spm_opt.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -101,7 +103,7 @@ def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = Non
     try:
         trajectory = plan(problem, name, warm_start)
         return Outcome(
-            name, time.perf_counter() - started, trajectory, evaluate(problem, trajectory)
+            name, time.perf_counter() - started, trajectory, _plan_report(problem, trajectory)
         )
     except Exception as error:  # noqa: BLE001 - one planner's failure is a row
         return Outcome(
@@ -110,6 +112,18 @@ def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = Non
             error=f"{type(error).__name__}: {error}",
             exception=error,
         )
+
+
+def _plan_report(problem: Problem, trajectory: Trajectory) -> Report:
+    """The evaluator's report of a plan, its contour violation naming the plan's tube (the
+    contour tolerance less the execution reserve, :func:`spm_opt.limits.contour_tube`)."""
+    report = evaluate(problem, trajectory)
+    reserve = problem.limits.execution_reserve / MM
+    named = [
+        dataclasses.replace(v, reserve=reserve) if v.rule == "contour deviation" else v
+        for v in report.violations
+    ]
+    return dataclasses.replace(report, violations=named)
 
 
 def run_planners(
@@ -144,7 +158,10 @@ def compare(problem: Problem, planners: Sequence[str] | None = None) -> pd.DataF
 
 
 def _limits_lines(problem: Problem) -> list[str]:
+    """The limits, one line each; the contour tolerance with the tubes a plan and an
+    executed cut are judged against."""
     bounds = problem.limits
+    tubes = "; ".join(tube.words for tube in contour_tubes(problem))
 
     def shown(value: float | None, scale: float, unit: str) -> str:
         return "not limited" if value is None else f"{value / scale:.4g} {unit}"
@@ -156,7 +173,8 @@ def _limits_lines(problem: Problem) -> list[str]:
         f"- joint jerk: {shown(bounds.max_joint_jerk, 1.0, 'rad/s³')}",
         f"- actuator torque: {problem.max_joint_torque:.4g} N·m",
         f"- tool speed on the skull: {shown(bounds.max_tool_speed, MM, 'mm/s')}",
-        f"- contour tolerance: {shown(bounds.contour_tolerance, MM, 'mm')}",
+        f"- contour tolerance: {shown(bounds.contour_tolerance, MM, 'mm')}"
+        + (f" — {tubes}" if tubes else ""),
     ]
 
 

@@ -54,7 +54,8 @@ _LOG = logging.getLogger(__name__)
 class Violation:
     """One limit broken: the worst value, the limit (``allowed``, before the evaluator's
     tolerance) and when (units in ``unit``); ``rule`` names its entry in
-    :data:`spm_opt.limits.RULES`."""
+    :data:`spm_opt.limits.RULES`. ``reserve`` (in ``unit``), when not 0, says the limit is
+    a plan's contour tube: the contour tolerance less this much kept for execution."""
 
     limit: str
     worst: float
@@ -62,12 +63,16 @@ class Violation:
     unit: str
     time_s: float
     rule: str
+    reserve: float = 0.0
 
     def __str__(self) -> str:
-        return (
-            f"{self.limit}: {self.worst:.4g} {self.unit} at t = {self.time_s:.3f} s "
-            f"(limit {self.allowed:.4g} {self.unit})"
-        )
+        limit = f"limit {self.allowed:.4g} {self.unit}"
+        if self.reserve:
+            limit += (
+                f": the plan's tube, {self.allowed + self.reserve:.4g} {self.unit} less "
+                f"{self.reserve:.4g} {self.unit} kept for execution"
+            )
+        return f"{self.limit}: {self.worst:.4g} {self.unit} at t = {self.time_s:.3f} s ({limit})"
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,23 @@ def to_png(figure: Figure, dpi: int = 150) -> bytes:
     return buffer.getvalue()
 
 
+REST_STEP = 0.01
+"""How far inside a plan :func:`moving_grid` moves its two ends, a fraction of the grid's
+interval (a plan's last piece may be far shorter than that: 1e-7 s)."""
+
+
+def moving_grid(trajectory: Trajectory, rate_hz: float) -> np.ndarray:
+    """The trajectory's time grid at ``rate_hz``, s, its two ends moved :data:`REST_STEP`
+    of an interval inside (and any sample beyond them dropped): a plan starts and ends at
+    rest, where the Coulomb friction has no direction (the model's sign of a rate is 0
+    there, or the sign of a rounding residue), so torques drawn on the plain grid end in a
+    drop to the torque at rest; on this grid they end in the torque that starts and stops
+    the motion."""
+    t = trajectory.time_grid(rate_hz)
+    inside = REST_STEP / rate_hz
+    return np.unique(np.clip(t, t[0] + inside, t[-1] - inside))
+
+
 def _legend_beside(axis: Axes) -> None:
     """The axis's legend to its right, outside the plot: it covers no data."""
     axis.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)

@@ -1,6 +1,7 @@
 """The planner comparison: one row per planner from the one evaluator, failures as rows,
 the files and figures the command line writes, and the experiment scripts."""
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import pytest
 import spm_opt as so
 from spm_opt.cli import main
 from spm_opt.comparison import COLUMNS
+from spm_opt.model.params import MM
 from spm_opt.planners import PLANNERS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -180,3 +182,47 @@ def test_the_summary_says_which_plans_share_a_duration(paper_problem):
     assert "Plans that share a duration" in text
     assert "cubic, again (40.00 s)" in text
     assert "toppra (" not in text
+
+
+def test_the_summary_names_the_plans_tube_and_the_executed_cuts(paper_problem):
+    """A plan is judged against the contour tolerance less the execution reserve, an
+    executed cut against the whole: the limits and cubic's contour violation say which."""
+    from spm_opt.comparison import comparison_markdown, run_planner
+    from spm_opt.limits import contour_tube
+
+    whole = contour_tube(paper_problem, executed=True) / MM
+    plan = contour_tube(paper_problem) / MM
+    kept = paper_problem.limits.execution_reserve / MM
+    assert kept > 0.0
+    text = comparison_markdown(paper_problem, [run_planner(paper_problem, "cubic")])
+    (limit,) = [line for line in text.splitlines() if line.startswith("- contour tolerance:")]
+    assert f"plan's tube {plan:.4g} mm ({whole:.4g} mm less {kept:.4g} mm kept for execution)" in (
+        limit
+    )
+    assert f"executed cut's tube {whole:.4g} mm" in limit
+    violations = text.split("## Violations and failures")[1]
+    assert (
+        f"(limit {plan:.4g} mm: the plan's tube, {whole:.4g} mm less {kept:.4g} mm kept for "
+        "execution)" in violations
+    )
+
+
+def test_without_a_reserve_the_summary_names_one_tube(paper_problem):
+    from spm_opt.comparison import comparison_markdown, run_planner
+
+    limits = dataclasses.replace(paper_problem.limits, execution_reserve=0.0)
+    problem = dataclasses.replace(paper_problem, limits=limits)
+    text = comparison_markdown(problem, [run_planner(problem, "cubic")])
+    whole = problem.limits.contour_tolerance / MM
+    assert f"- contour tolerance: {whole:.4g} mm — tube {whole:.4g} mm (a plan's and" in text
+    assert "plan's tube" not in text and f"(limit {whole:.4g} mm)" in text
+
+
+def test_a_violation_names_the_plans_tube_only_when_it_keeps_a_reserve():
+    plain = so.Violation("contour deviation", 0.116, 0.07, "mm", 5.064, "contour deviation")
+    assert str(plain) == "contour deviation: 0.116 mm at t = 5.064 s (limit 0.07 mm)"
+    named = dataclasses.replace(plain, reserve=0.03)
+    assert str(named) == (
+        "contour deviation: 0.116 mm at t = 5.064 s "
+        "(limit 0.07 mm: the plan's tube, 0.1 mm less 0.03 mm kept for execution)"
+    )

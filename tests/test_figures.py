@@ -20,15 +20,18 @@ from types import ModuleType
 import numpy as np
 import pandas as pd
 import pytest
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from test_identify import synthetic_samples, with_efficiency
 
 import spm_opt as so
+from spm_opt.comparison import run_planner
 from spm_opt.figure_rules import ANTERIOR, TOP_VIEW, figure_faults, has_unit, mark_top_view
 from spm_opt.identify import prediction_figure
-from spm_opt.model import kinematics
+from spm_opt.limits import contour_tube
+from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
-from spm_opt.plots import friction_figure, to_png
+from spm_opt.plots import REST_STEP, friction_figure, moving_grid, to_png
 from spm_opt.report import comparison_figures
 from spm_opt.sweep import results_figures
 from spm_opt.verify.hardware import CutComparison, RunSamples, cut_figure
@@ -250,6 +253,112 @@ def test_the_cuts_show_the_contour_on_top_the_anterior_and_each_deviation(
     assert along[0] == pytest.approx(0.0, abs=0.5)
     assert along[-1] == pytest.approx(paper_problem.contour.length / MM, abs=0.5)
     assert figure_faults(figure) == []
+
+
+def _horizontal_lines(axis: Axes) -> list[float]:
+    """The heights of ``axis``'s horizontal lines (its drawn limits)."""
+    return [
+        float(line.get_ydata()[0])
+        for line in axis.lines
+        if len(set(np.asarray(line.get_ydata(), float))) == 1
+    ]
+
+
+def test_the_cuts_draw_both_tubes_at_their_heights_and_name_them(
+    paper_problem: so.Problem, baseline: so.Trajectory
+) -> None:
+    figure = comparison_figures.cuts(paper_problem, [_Planned("cubic", baseline)])
+    plan, executed = contour_tube(paper_problem) / MM, contour_tube(paper_problem, True) / MM
+    assert plan < executed  # the paper's problem keeps a reserve for execution
+    assert _horizontal_lines(figure.axes[1]) == pytest.approx([plan, executed])
+    words = [text.get_text() for text in figure.legends[0].get_texts()]
+    kept = executed - plan
+    assert (
+        f"plan's tube {plan:.4g} mm ({executed:.4g} mm less {kept:.4g} mm kept for execution)"
+        in words
+    )
+    assert f"executed cut's tube {executed:.4g} mm" in words
+
+
+@pytest.fixture(scope="module")
+def headline_panels(paper_problem: so.Problem) -> dict[str, Axes]:
+    """The headline figure of cubic (5 violations) and toppra (none), panels by the
+    first line of their titles."""
+    outcomes = [run_planner(paper_problem, name) for name in ("cubic", "toppra")]
+    figure = comparison_figures.headline(paper_problem, outcomes)
+    assert figure_faults(figure) == []
+    return {axis.get_title().splitlines()[0]: axis for axis in figure.axes}
+
+
+def test_the_headline_bars_start_at_zero_or_say_their_axis_is_logarithmic(
+    headline_panels: dict[str, Axes],
+) -> None:
+    assert len(headline_panels) == 6
+    for title, axis in headline_panels.items():
+        if axis.get_yscale() == "log":
+            assert "log scale" in axis.get_ylabel(), title
+        else:
+            assert axis.get_ylim()[0] == 0.0, title
+    assert headline_panels["duration / lower bound"].get_yscale() == "linear"
+
+
+def test_every_headline_bar_is_labelled_with_its_value_a_zero_count_too(
+    headline_panels: dict[str, Axes],
+) -> None:
+    for title, axis in headline_panels.items():
+        labels = [text.get_text() for text in axis.texts]
+        assert len(labels) == 2 and all(labels), title
+    assert [text.get_text() for text in headline_panels["violations"].texts] == ["5", "0"]
+
+
+def test_each_headline_panel_draws_its_limit_or_says_it_has_none(
+    paper_problem: so.Problem, headline_panels: dict[str, Axes]
+) -> None:
+    tubes = [contour_tube(paper_problem) / MM, contour_tube(paper_problem, True) / MM]
+    speed = paper_problem.limits.max_tool_speed / MM  # type: ignore[operator]
+    drawn = {
+        "duration / lower bound": [1.0],
+        "max contour deviation (mm)": tubes,
+        "max tool speed (mm/s)": [speed],
+    }
+    for title, axis in headline_panels.items():
+        assert _horizontal_lines(axis) == pytest.approx(drawn.get(title, [])), title
+        if title not in drawn:
+            assert "no limit" in axis.get_title() or "0" in axis.get_title(), title
+    deviation = headline_panels["max contour deviation (mm)"].get_title()
+    assert f"plan's tube {tubes[0]:.4g} mm" in deviation
+    assert f"executed cut's tube {tubes[1]:.4g} mm" in deviation
+
+
+@pytest.mark.parametrize("planner", ["cubic", "ocp-min-jerk"])
+def test_the_torques_run_to_the_plans_ends_without_a_drop_to_rest(
+    paper_problem: so.Problem, planner: str
+) -> None:
+    """At rest the friction has no direction: the model's torque at the plan's first or
+    last instant is far from the torque that starts or stops it (cubic: 0 against
+    0.028 N·m; ocp-min-jerk's last piece is 1e-7 s long and its rates' signs there are a
+    rounding residue's), and the figure draws the latter."""
+    trajectory = so.plan(paper_problem, planner)
+    figure = comparison_figures.torques(paper_problem, [_Planned(planner, trajectory)])
+    ends = np.array([trajectory.start_time, trajectory.start_time + trajectory.duration])
+    state = (trajectory.position(ends), trajectory.velocity(ends), trajectory.acceleration(ends))
+    at_rest = dynamics.actuator_torque(paper_problem.robot, *state)  # (2 ends, 2 joints)
+    inside = REST_STEP / comparison_figures.RATE_HZ
+    drawn = []
+    for axis in figure.axes[:2]:
+        (line,) = axis.lines
+        t, torque = np.asarray(line.get_xdata()), np.asarray(line.get_ydata())
+        assert abs(torque[-1] - torque[-2]) < 2e-3 and abs(torque[0] - torque[1]) < 2e-3
+        assert t[[0, -1]] == pytest.approx(ends + [inside, -inside], abs=1e-12)
+        drawn.append(torque[[0, -1]])
+    assert np.abs(at_rest - np.transpose(drawn)).max() > 0.02  # the drop the ends leave out
+
+
+def test_the_moving_grid_is_the_plain_grid_with_its_ends_inside(baseline: so.Trajectory) -> None:
+    plain, moving = baseline.time_grid(200.0), moving_grid(baseline, 200.0)
+    np.testing.assert_array_equal(moving[1:-1], plain[1:-1])
+    assert moving[0] - plain[0] == pytest.approx(REST_STEP / 200.0)
+    assert plain[-1] - moving[-1] == pytest.approx(REST_STEP / 200.0)
 
 
 def test_the_friction_figure_says_why_it_shows_two_coefficients() -> None:

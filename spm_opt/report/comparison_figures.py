@@ -15,9 +15,17 @@ import numpy as np
 from spm_opt.figure_rules import mark_top_view
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
+from spm_opt.plots import moving_grid
 from spm_opt.problem import Problem
 from spm_opt.report.columns import column
-from spm_opt.report.planner_style import metric_label, new_figure, planner_style
+from spm_opt.report.planner_style import (
+    Limit,
+    contour_tubes,
+    labelled_handles,
+    metric_label,
+    new_figure,
+    planner_style,
+)
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -31,6 +39,8 @@ class Measured(Protocol):
 
     @property
     def duration_over_lower_bound(self) -> float: ...
+    @property
+    def duration_lower_bound_s(self) -> float: ...
     @property
     def max_contour_deviation_mm(self) -> float: ...
     @property
@@ -57,7 +67,9 @@ class Planned(Protocol):
 RATE_HZ = 200.0
 """Sampling rate of the drawn curves, Hz."""
 FLOOR_MM = 1e-6
-"""The deviation panel's floor, mm: a cut on the contour is drawn there."""
+"""The deviation panels' floor, mm: a cut on the contour is drawn there."""
+LIMIT_LINES = (("--", "dashed"), (":", "dotted"))
+"""How a panel draws its limits, the first with the first style, and the style's name."""
 
 
 def _style(index: int, samples: int) -> dict[str, object]:
@@ -72,17 +84,23 @@ def _style(index: int, samples: int) -> dict[str, object]:
     }
 
 
-def _legend_below(figure: Figure, axis: Axes) -> None:
-    """The figure's legend, from ``axis``'s labelled lines, below the panels."""
-    handles, labels = axis.get_legend_handles_labels()
-    figure.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 5))
+def _legend_below(figure: Figure, *axes: Axes) -> None:
+    """The figure's legend, from ``axes``' labelled lines (each label once), below the
+    panels."""
+    handles = labelled_handles(axes)
+    figure.legend(
+        list(handles.values()), list(handles), loc="outside lower center", ncol=min(len(handles), 5)
+    )
 
 
-def _samples(outcome: Planned) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """t (N,), s, and q, q̇, q̈ (N, 2) of a plan on the drawing grid."""
+def _samples(
+    outcome: Planned, moving: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """t (N,), s, and q, q̇, q̈ (N, 2) of a plan on the drawing grid; ``moving``: its ends
+    just inside the plan, where it moves (:func:`spm_opt.plots.moving_grid`)."""
     trajectory = outcome.trajectory
     assert trajectory is not None
-    t = trajectory.time_grid(RATE_HZ)
+    t = moving_grid(trajectory, RATE_HZ) if moving else trajectory.time_grid(RATE_HZ)
     return t, trajectory.position(t), trajectory.velocity(t), trajectory.acceleration(t)
 
 
@@ -112,11 +130,12 @@ def joints(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
 
 
 def torques(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
-    """Actuator torques (N·m, the model with exact friction) over time (s)."""
+    """Actuator torques (N·m, the model with exact friction) over time (s), from the first
+    instant of motion to the last (at rest, the friction has no direction)."""
     figure = new_figure((10, 6))
     axes = figure.subplots(2, 1, sharex=True)
     for index, outcome in enumerate(outcomes):
-        t, q, qd, qdd = _samples(outcome)
+        t, q, qd, qdd = _samples(outcome, moving=True)
         torque = dynamics.actuator_torque(problem.robot, q, qd, qdd)
         for joint, axis in enumerate(axes):
             axis.plot(t, torque[:, joint], **_style(index, len(t)), label=outcome.planner)
@@ -160,8 +179,8 @@ def cuts(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
     """Left: every cut on the skull seen from above (mm), the planned contour drawn over
     them, the landmarks and the anterior direction. Right: each cut's distance from the
     contour (mm, log scale) against the place along the contour it is nearest to (mm),
-    with the landmarks and the tolerance: cuts a tenth of a millimetre apart, one on the
-    other at the left, stand apart there."""
+    with the landmarks and the tubes a plan and an executed cut must keep within: cuts a
+    tenth of a millimetre apart, one on the other at the left, stand apart there."""
     figure = new_figure((13, 7))
     top, off = figure.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.3]})
     contour = problem.contour
@@ -177,7 +196,7 @@ def cuts(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
         off.semilogy(along, np.maximum(deviation, FLOOR_MM), **style, linewidth=1)
     _contour_from_above(top, problem)
     _deviation_axes(off, problem)
-    _legend_below(figure, top)
+    _legend_below(figure, top, off)
     figure.suptitle(f"{problem.name}: the planned contour and every planner's cut")
     return figure
 
@@ -200,7 +219,7 @@ def _contour_from_above(axis: Axes, problem: Problem) -> None:
 
 
 def _deviation_axes(axis: Axes, problem: Problem) -> None:
-    """The deviation panel's landmarks, tolerance, floor and words."""
+    """The deviation panel's landmarks, contour tubes, floor and words."""
     for place, name in zip(
         problem.contour.landmark_arc_lengths / MM, problem.visit_names, strict=True
     ):
@@ -213,17 +232,8 @@ def _deviation_axes(axis: Axes, problem: Problem) -> None:
             textcoords="offset points",
             fontsize=8,
         )
-    tolerance = problem.limits.contour_tolerance
-    if tolerance is not None:
-        axis.axhline(tolerance / MM, color="black", linestyle="--", linewidth=1)
-        axis.annotate(
-            f"tolerance {tolerance / MM:g} mm",
-            (0.0, tolerance / MM),
-            xycoords=("axes fraction", "data"),
-            xytext=(4, 3),
-            textcoords="offset points",
-            fontsize=8,
-        )
+    for (style, _), tube in zip(LIMIT_LINES, contour_tubes(problem), strict=False):
+        axis.axhline(tube.value, color="black", linestyle=style, linewidth=1, label=tube.words)
     axis.set_xlabel("place along the planned contour (mm)")
     axis.set_ylabel("distance from the planned contour (mm)")
     axis.set_title(
@@ -237,33 +247,92 @@ _HEADLINES: tuple[tuple[str, Callable[[Measured], float], bool], ...] = (
     ("duration_over_lower_bound", lambda r: r.duration_over_lower_bound, False),
     ("max_contour_deviation_mm", lambda r: r.max_contour_deviation_mm, True),
     ("max_tool_speed_mm_s", lambda r: r.max_tool_speed_mm_s, False),
-    ("rms_jerk_rad_s3", lambda r: max(r.rms_jerk_rad_s3), True),
+    ("rms_jerk_rad_s3", lambda r: max(r.rms_jerk_rad_s3), False),
     ("effort_n2m2s", lambda r: r.effort_n2m2s, False),
     ("violation_count", lambda r: len(r.violations), False),
 )
 
 
+def _headline_limits(problem: Problem, lower_bound_s: float) -> dict[str, list[Limit]]:
+    """The limits the headline panels draw, by column, in the column's unit."""
+    drawn = {
+        "duration_over_lower_bound": [
+            Limit(1.0, f"1, the lower bound ({lower_bound_s:.2f} s)"),
+        ],
+        "max_contour_deviation_mm": contour_tubes(problem),
+    }
+    speed = problem.limits.max_tool_speed
+    if speed is not None:
+        drawn["max_tool_speed_mm_s"] = [Limit(speed / MM, f"limit {speed / MM:.4g} mm/s")]
+    return drawn
+
+
+def _headline_notes(problem: Problem) -> dict[str, str]:
+    """What the headline panels without a drawn limit say instead, by column."""
+    jerk = problem.limits.max_joint_jerk
+    return {
+        "rms_jerk_rad_s3": "no limit: the RMS has none"
+        + ("" if jerk is None else f" (the {jerk:.4g} rad/s³ limit bounds the peak)"),
+        "effort_n2m2s": "no limit",
+        "violation_count": "a clean plan has 0",
+    }
+
+
+def _bars(axis: Axes, names: list[str], values: list[float], name: str, log: bool) -> None:
+    """One bar per planner, each labelled with its value (a zero too); a log axis floors
+    the bars at :data:`FLOOR_MM` and says so, a linear one starts at zero, a count's
+    ticks are whole numbers."""
+    from matplotlib.ticker import MaxNLocator
+
+    drawn = np.maximum(values, FLOOR_MM) if log else values
+    colours = [planner_style(k)["color"] for k in range(len(names))]
+    bars = axis.bar(names, drawn, color=colours, log=log)
+    shown = column(name)
+    axis.bar_label(
+        bars,
+        [shown.show(value) for value in values],
+        fontsize=7,
+        padding=2,
+        bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 0.5},
+    )
+    axis.margins(y=0.15)
+    if all(isinstance(value, int) for value in values):
+        axis.yaxis.set_major_locator(MaxNLocator(integer=True))
+    label = metric_label(name)
+    if log:
+        axis.set_ylabel(f"{label}, log scale (under {FLOOR_MM:g}: at it)", fontsize=8)
+    else:
+        axis.set_ylim(bottom=0.0)
+        axis.set_ylabel(label, fontsize=8)
+
+
+def _limit_lines(axis: Axes, limits: list[Limit]) -> list[str]:
+    """Draw each limit as a horizontal line; return the lines' words for the title."""
+    words = []
+    for (style, style_name), limit in zip(LIMIT_LINES, limits, strict=False):
+        axis.axhline(limit.value, color="black", linestyle=style, linewidth=1)
+        words.append(f"{style_name}: {limit.words}")
+    return words
+
+
 def headline(problem: Problem, outcomes: Sequence[Planned]) -> Figure:
-    """Bars of the headline figures, one panel per figure, one bar per planner."""
-    figure = new_figure((13, 7))
+    """Bars of the headline figures, one panel per figure, one bar per planner, each
+    labelled with its value; the panels draw their limits and name them in their titles
+    (a panel without one says so)."""
+    figure = new_figure((14, 8.5))
     axes = figure.subplots(2, 3).ravel()
     names = [o.planner for o in outcomes]
-    colours = [planner_style(k)["color"] for k in range(len(outcomes))]
-    limits = problem.limits
-    drawn_limits = {
-        "max_tool_speed_mm_s": limits.max_tool_speed,
-        "max_contour_deviation_mm": limits.contour_tolerance,
-    }
+    reports = [o.report for o in outcomes]
+    limits = _headline_limits(problem, reports[0].duration_lower_bound_s)  # type: ignore[union-attr]
+    notes = _headline_notes(problem)
     for axis, (name, value, log) in zip(axes, _HEADLINES, strict=True):
-        values = [value(o.report) for o in outcomes]  # type: ignore[arg-type]
-        axis.bar(names, values, color=colours, log=log)
-        axis.set_title(column(name).label, fontsize=10)
-        axis.set_ylabel(metric_label(name), fontsize=8)
+        _bars(axis, names, [value(r) for r in reports], name, log)  # type: ignore[arg-type]
+        words = _limit_lines(axis, limits.get(name, [])) or [notes[name]]
+        axis.set_title("\n".join([column(name).label, *words]), fontsize=9)
         axis.tick_params(axis="x", labelrotation=45, labelsize=8)
         axis.grid(True, axis="y", alpha=0.3)
-        if drawn_limits.get(name) is not None:
-            axis.axhline(drawn_limits[name] / MM, color="black", linestyle="--")
-        if name == "duration_over_lower_bound":
-            axis.set_ylim(min(0.95, min(values) - 0.01), max(values) + 0.02)
-    figure.suptitle(f"{problem.name}: headline figures (dashed: the limit)")
+    figure.suptitle(
+        f"{problem.name}: headline figures (black lines: the limits; each title names its "
+        "panel's, or says it has none)"
+    )
     return figure

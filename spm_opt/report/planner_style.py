@@ -1,12 +1,15 @@
 """How the comparison's and the sweeps' figures draw planners and name metrics: one colour,
 line style and marker per planner by its place in the list, a metric's axis label with its
-unit, and one legend gathered from a figure's panels."""
+unit, the contour tubes' words, and one legend gathered from a figure's panels."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
+from spm_opt.limits import contour_tube
+from spm_opt.model.params import MM
+from spm_opt.problem import Problem
 from spm_opt.report.columns import column
 
 if TYPE_CHECKING:
@@ -51,3 +54,31 @@ def labelled_handles(axes: Iterable[Axes]) -> dict[str, Artist]:
         for handle, label in zip(*axis.get_legend_handles_labels(), strict=True):
             handles.setdefault(label, handle)
     return handles
+
+
+class Limit(NamedTuple):
+    """A limit as a figure draws it and a summary writes it: its value (in the unit of the
+    quantity it limits) and its words."""
+
+    value: float
+    words: str
+
+
+def contour_tubes(problem: Problem) -> list[Limit]:
+    """The contour tubes a cut is judged against, mm, smaller first: a plan's (the
+    contour tolerance less the execution reserve) and an executed cut's (the whole
+    tolerance); one tube when no reserve is kept, none when the problem sets no tolerance."""
+    executed = contour_tube(problem, executed=True)
+    if executed is None:
+        return []
+    whole, plan = executed / MM, contour_tube(problem) / MM  # type: ignore[operator]
+    if problem.limits.execution_reserve == 0.0:
+        return [Limit(whole, f"tube {whole:.4g} mm (a plan's and an executed cut's)")]
+    kept = problem.limits.execution_reserve / MM
+    return [
+        Limit(
+            plan,
+            f"plan's tube {plan:.4g} mm ({whole:.4g} mm less {kept:.4g} mm kept for execution)",
+        ),
+        Limit(whole, f"executed cut's tube {whole:.4g} mm"),
+    ]
