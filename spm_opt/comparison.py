@@ -8,7 +8,6 @@ A planner that fails gets a row with its error; the others still run.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -103,7 +102,7 @@ def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = Non
     try:
         trajectory = plan(problem, name, warm_start)
         return Outcome(
-            name, time.perf_counter() - started, trajectory, _plan_report(problem, trajectory)
+            name, time.perf_counter() - started, trajectory, evaluate(problem, trajectory)
         )
     except Exception as error:  # noqa: BLE001 - one planner's failure is a row
         return Outcome(
@@ -112,18 +111,6 @@ def run_planner(problem: Problem, name: str, warm_start: Trajectory | None = Non
             error=f"{type(error).__name__}: {error}",
             exception=error,
         )
-
-
-def _plan_report(problem: Problem, trajectory: Trajectory) -> Report:
-    """The evaluator's report of a plan, its contour violation naming the plan's tube (the
-    contour tolerance less the execution reserve, :func:`spm_opt.limits.contour_tube`)."""
-    report = evaluate(problem, trajectory)
-    reserve = problem.limits.execution_reserve / MM
-    named = [
-        dataclasses.replace(v, reserve=reserve) if v.rule == "contour deviation" else v
-        for v in report.violations
-    ]
-    return dataclasses.replace(report, violations=named)
 
 
 def run_planners(

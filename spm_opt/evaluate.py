@@ -49,6 +49,9 @@ DEFAULT_RATE_HZ = 1000.0
 
 _LOG = logging.getLogger(__name__)
 
+TUBE_RULES = frozenset(("contour deviation", "landmark visit", "coverage", "backtracking"))
+"""The rules whose limit is the cut's tube (:func:`spm_opt.limits.path_tolerance`)."""
+
 
 @dataclass(frozen=True)
 class Violation:
@@ -409,7 +412,10 @@ def judge(
     backtrack = np.maximum.accumulate(progress) - progress
     landmark_errors = _landmark_errors(problem, claimed, t, directions, path, between_samples)
 
-    checks = _Checks(t)
+    # a plan's tube keeps part of the tolerance for execution: its violations say so
+    tolerance = limits.contour_tolerance
+    reserve = 0.0 if tube is None or tolerance is None else (tolerance - tube) / MM
+    checks = _Checks(t, reserve)
     for joint in range(2):
         name = f"theta{joint + 1}"
         low, high = robot.joint_range[joint]
@@ -517,8 +523,9 @@ def judge(
 class _Checks:
     """Collects violations: the worst sample beyond a limit and its rule's allowance."""
 
-    def __init__(self, t: np.ndarray) -> None:
+    def __init__(self, t: np.ndarray, reserve_mm: float = 0.0) -> None:
         self.t = t
+        self.reserve_mm = reserve_mm
         self.found: list[Violation] = []
 
     def upper(
@@ -550,8 +557,11 @@ class _Checks:
             self._add(rule, label, values[worst], limit, self.t[worst])
 
     def _add(self, rule: str, label: str, worst: float, limit: float, time: float) -> None:
+        reserve = self.reserve_mm if rule in TUBE_RULES else 0.0
         self.found.append(
-            Violation(label, float(worst), float(limit), RULES[rule].unit, float(time), rule)
+            Violation(
+                label, float(worst), float(limit), RULES[rule].unit, float(time), rule, reserve
+            )
         )
 
 

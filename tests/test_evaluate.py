@@ -332,3 +332,26 @@ def test_a_trajectory_is_measured_once_per_problem_rate_and_landmark_times(
     moved = so.evaluate(paper_problem, trajectory)
     assert measured == [500.0, 1000.0, 1000.0]
     assert moved.max_landmark_error_mm > first.max_landmark_error_mm
+
+
+def test_a_plans_tube_violations_say_the_tube_keeps_the_execution_reserve(paper_problem, baseline):
+    """The paper's cubic leaves the 0.07 mm tube (0.1 mm less 0.03 mm): the contour and the
+    coverage violations say which tube; with no reserve kept they name the limit alone."""
+    report = so.evaluate(paper_problem, baseline)
+    tube = {
+        v.rule: str(v) for v in report.violations if v.rule in ("contour deviation", "coverage")
+    }
+    assert len(tube) == 2
+    for text in tube.values():
+        assert text.endswith(
+            "(limit 0.07 mm: the plan's tube, 0.1 mm less 0.03 mm kept for execution)"
+        )
+    speed = next(v for v in report.violations if v.rule == "tool speed")
+    assert str(speed).endswith("(limit 3 mm/s)")
+    whole = dataclasses.replace(
+        paper_problem, limits=dataclasses.replace(paper_problem.limits, execution_reserve=0.0)
+    )
+    contour = next(
+        v for v in so.evaluate(whole, baseline).violations if v.rule == "contour deviation"
+    )
+    assert str(contour).endswith("(limit 0.1 mm)")
