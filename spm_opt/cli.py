@@ -139,8 +139,16 @@ def _parser() -> argparse.ArgumentParser:
         "--log",
         type=Path,
         default=None,
-        help="execution log CSV (spm-opt execute --log) whose measured cut is drawn too "
-        "(default: only the plan)",
+        help="execution log CSV (spm-opt execute --log) whose measured cut is drawn and "
+        "judged too, as spm-opt evaluate judges it (default: only the plan)",
+    )
+    review.add_argument(
+        "--trace",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the plant's true state over the logged run (spm-opt execute --trace; only with "
+        "--log): its true cut is judged too (default: not judged)",
     )
     review.add_argument(
         "--other-problem",
@@ -658,14 +666,11 @@ def _review(args: argparse.Namespace) -> None:
 
     check_output_directory(args.out, "--out")
     problem = load_problem(args.problem)
-    given = review_inputs(problem, args.plan, args.log, args.other_problem)
-    trajectory, log = given.trajectory, given.log
+    given = review_inputs(problem, args.plan, args.log, args.other_problem, args.trace)
     skull = problem.skull if problem.skull is not None else Skull(surface=problem.surface)
     files = {
-        args.out / "review.html": review_page(
-            problem, skull, trajectory, log, warnings=given.warnings
-        ),
-        args.out / "review.png": review_png(problem, skull, trajectory, log),
+        args.out / "review.html": review_page(problem, skull, given),
+        args.out / "review.png": review_png(problem, skull, given),
     }
     write_atomically(files)
     for path in files:

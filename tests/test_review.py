@@ -19,12 +19,12 @@ from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
 from spm_opt.evaluate import evaluate
-from spm_opt.evaluate_execution import read_log_checked
+from spm_opt.evaluate_execution import MEASURED, read_log_checked
 from spm_opt.execution.log import COLUMNS, header_path
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.provenance import check_run_of
-from spm_opt.report.review import BACKGROUND, review_inputs, review_page
+from spm_opt.report.review import ASIDE_WIDTH, ReviewInputs, review_inputs, review_page
 from spm_opt.report.review_png import review_png
 from spm_opt.report.review_scene import (
     MAX_SKULL_FACES,
@@ -58,21 +58,21 @@ def sphere() -> Skull:
 
 @pytest.fixture(scope="module")
 def page(paper_problem: so.Problem, sphere: Skull, baseline: so.Trajectory) -> str:
-    return review_page(paper_problem, sphere, baseline)
+    return review_page(paper_problem, sphere, ReviewInputs(baseline))
 
 
 def _log_table(trajectory: so.Trajectory, offset_rad: float = 0.002) -> dict[str, np.ndarray]:
     """An execution log's columns for a run that measures the plan ``offset_rad`` off, after
-    an approach row and with one failed read."""
+    an approach row and with one failed read (every measured value empty)."""
     t = np.linspace(trajectory.start_time, trajectory.end_time, 801)
     q = trajectory.position(t) + offset_rad
     columns: dict[str, np.ndarray] = {name: np.zeros(len(t) + 1) for name in COLUMNS}
     columns["time_s"] = np.concatenate([[-0.01], t])
     columns["phase"] = np.array(["approach", *["plan"] * len(t)], dtype=object)
     for joint in (0, 1):
-        measured = np.concatenate([[0.0], q[:, joint]])
-        measured[5] = np.nan  # a failed read
-        columns[f"position_theta{joint + 1}_rad"] = measured
+        columns[f"position_theta{joint + 1}_rad"] = np.concatenate([[0.0], q[:, joint]])
+    for name in MEASURED:
+        columns[name][5] = np.nan  # a failed read
     return columns
 
 
@@ -164,7 +164,9 @@ def test_the_png_is_a_picture_of_sensible_size(
 ) -> None:
     from matplotlib.image import imread
 
-    data = review_png(paper_problem, sphere, baseline, pd.DataFrame(_log_table(baseline)))
+    log = _log_file(_plan_file(baseline, tmp_path), tmp_path, paper_problem)
+    given = review_inputs(paper_problem, tmp_path / "cubic.csv", log)
+    data = review_png(paper_problem, sphere, given)
     assert data.startswith(b"\x89PNG\r\n\x1a\n") and 50_000 < len(data) < 3_000_000
     (tmp_path / "review.png").write_bytes(data)
     height, width, _ = imread(tmp_path / "review.png").shape
@@ -351,19 +353,61 @@ def test_a_run_on_the_simulated_robot_is_reviewed_with_its_plan_only(
         check_run_of(longer, "longer.csv", unhashed, "run.csv")
 
 
-@pytest.mark.slow
-def test_the_page_renders_in_headless_chromium(page: str, tmp_path: Path) -> None:
-    """The scene is drawn by WebGL on software GL (SwiftShader): the middle of the plot,
-    where the camera looks at the flap, holds the light grey skull and the cut."""
-    from matplotlib.colors import to_rgb
-    from matplotlib.image import imread
+_MEASURE = """
+function mul(m, v) {
+  const out = [0, 0, 0, 0];
+  for (let row = 0; row < 4; row++) {
+    for (let k = 0; k < 4; k++) out[row] += m[k * 4 + row] * v[k];
+  }
+  return out;
+}
+function measure() {
+  const gd = document.querySelector(".plotly-graph-div");
+  const scene = gd && gd._fullLayout && gd._fullLayout.scene && gd._fullLayout.scene._scene;
+  const camera = scene && scene.glplot && scene.glplot.cameraParams;
+  if (!camera || !camera.projection) { setTimeout(measure, 200); return; }
+  const scale = scene.dataScale;
+  const robot = ["upper arc (θ1)", "lower arc (θ2)", "upper platform", "lower platform", "tool"];
+  let reach = 0, points = 0;
+  for (const trace of gd._fullData) {
+    if (!robot.includes(trace.name)) continue;
+    for (let i = 0; i < trace.x.length; i++) {
+      const clip = mul(camera.projection, mul(camera.view, mul(camera.model,
+        [trace.x[i] * scale[0], trace.y[i] * scale[1], trace.z[i] * scale[2], 1])));
+      reach = Math.max(reach, Math.abs(clip[0] / clip[3]), Math.abs(clip[1] / clip[3]));
+      points++;
+    }
+  }
+  const box = (el) => {
+    const r = el.getBoundingClientRect();
+    return [r.left, r.top, r.right, r.bottom];
+  };
+  const out = {
+    window: [window.innerWidth, window.innerHeight],
+    plot: box(gd),
+    slider: box(gd.querySelector(".slider-container")),
+    labels: [...gd.querySelectorAll(".slider-label")].map(box),
+    robot_points: points,
+    robot_reach: reach,
+  };
+  const pre = document.createElement("pre");
+  pre.id = "measured";
+  pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+}
+setTimeout(measure, 500);
+"""
+"""Appended to the page for the browser: once plotly has drawn the scene, it writes into a
+``<pre id="measured">`` the window's size, the plot's and the slider's boxes and each slider
+label's (px), and the robot's farthest point from the view's centre in normalised device
+coordinates (beyond 1: out of the picture), from the camera's own matrices."""
 
+
+def _chromium(page: Path, size: tuple[int, int], folder: Path, *action: str) -> str:
+    """Run headless Chromium on ``page`` at window ``size`` (px) with ``action``; stdout."""
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip("chromium is not installed (apt-get install chromium)")
-    html = tmp_path / "review.html"
-    html.write_text(page, encoding="utf-8")
-    shot = tmp_path / "shot.png"
     command = [
         chromium,
         "--headless",
@@ -372,27 +416,47 @@ def test_the_page_renders_in_headless_chromium(page: str, tmp_path: Path) -> Non
         "--use-gl=swiftshader",
         "--enable-unsafe-swiftshader",
         "--hide-scrollbars",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--window-size=1200,900",
+        f"--user-data-dir={folder / 'profile'}",
+        f"--window-size={size[0]},{size[1]}",
         "--virtual-time-budget=20000",
-        f"--screenshot={shot}",
-        html.as_uri(),
+        *action,
+        page.as_uri(),
     ]
+    done = subprocess.run(command, capture_output=True, timeout=180, check=False, text=True)
+    return done.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("size", [(1400, 900), (1400, 1600)])
+def test_the_page_renders_in_headless_chromium(
+    size: tuple[int, int], page: str, tmp_path: Path
+) -> None:
+    """The scene is drawn by WebGL on software GL (SwiftShader), right of the figures: the
+    light grey skull is there; the plot fills the window's height, the whole robot is in
+    the picture and the slider's labels in the window."""
+    from matplotlib.image import imread
+
+    html = tmp_path / "review.html"
+    html.write_text(page.replace("</body>", f"<script>{_MEASURE}</script></body>"), "utf-8")
+    shot = tmp_path / "shot.png"
     started = time.perf_counter()
-    subprocess.run(command, capture_output=True, timeout=180, check=False)
+    _chromium(html, size, tmp_path, f"--screenshot={shot}")
     seconds = time.perf_counter() - started
     assert shot.is_file(), f"no screenshot after {seconds:.1f} s"
     pixels = imread(shot)[..., :3]
-    assert pixels.shape[:2] == (900, 1200)
-    # the plot's middle: below the headline table, between the legend and the colour bar
-    middle = pixels[330:600, 400:800].reshape(-1, 3)
-    background = np.array(to_rgb(BACKGROUND))
-    drawn = np.max(np.abs(middle - background), axis=1) > 0.05
+    assert pixels.shape[:2] == (size[1], size[0])
+    plot = pixels[:, int(ASIDE_WIDTH.removesuffix("px")) :].reshape(-1, 3)
     # the skull's shades of grey, darker than the light grey box plotly shows without WebGL
-    darkest, lightest = middle.min(axis=1), middle.max(axis=1)
+    darkest, lightest = plot.min(axis=1), plot.max(axis=1)
     skull = (lightest - darkest < 0.03) & (darkest > 0.6) & (lightest < 0.92)
-    cut = lightest - darkest > 0.3  # the planned cut's colours
-    seen = f"{drawn.mean():.0%} drawn, {skull.mean():.0%} skull, {cut.mean():.1%} cut"
-    assert drawn.mean() > 0.5 and skull.mean() > 0.3 and cut.mean() > 0.003, (
-        f"{seen} in the middle after {seconds:.1f} s"
-    )
+    assert 0.005 < skull.mean() < 0.3, f"{skull.mean():.1%} skull after {seconds:.1f} s"
+    dom = _chromium(html, size, tmp_path, "--dump-dom")
+    found = re.search(r'<pre id="measured">(.*?)</pre>', dom)
+    assert found is not None, "the page did not measure its plot"
+    measured = json.loads(found.group(1))
+    width, height = measured["window"]
+    left, top, right, bottom = measured["plot"]
+    assert bottom <= height + 1 and bottom - top >= 0.95 * height, measured["plot"]
+    assert measured["robot_points"] > 100 and measured["robot_reach"] < 0.95, measured
+    labels = np.array(measured["labels"])
+    assert len(labels) > 5 and labels[:, 3].max() <= height and labels[:, 2].max() <= width
