@@ -20,6 +20,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
+from spm_opt.choices import (
+    CONTOUR_PLANNER_NAMES,
+    DEFAULT_MAX_TASKS,
+    PLANNER_NAMES,
+    TRACKING_MODES,
+)
 from spm_opt.errors import InputError, PlanningError, RunInterrupted, SpmOptError, require
 from spm_opt.output_paths import check_output_directory, check_output_file
 from spm_opt.version import package_version
@@ -63,10 +69,24 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"spm-opt: error: {message} (see {self.prog} --help)\n")
 
 
-def _parser() -> argparse.ArgumentParser:
-    from spm_opt.planners import PLANNERS
-    from spm_opt.sweep.spec import DEFAULT_MAX_TASKS
+_PLAN_MAX_RATE_HZ = 1e5
+"""The highest plan --rate, Hz: how densely the CSV may sample the plan."""
+_NOT_COMPARED = tuple(name for name in PLANNER_NAMES if name not in CONTOUR_PLANNER_NAMES)
+"""The planners compare leaves out unless named: their plans cut no contour."""
 
+
+def _command(
+    commands: argparse._SubParsersAction, name: str, summary: str, details: str
+) -> argparse.ArgumentParser:
+    """A sub-command whose ``summary`` (a phrase) is its line in ``spm-opt --help`` and,
+    followed by ``details``, the description atop ``spm-opt NAME --help``."""
+    return commands.add_parser(
+        name, help=summary, description=f"{summary[0].upper()}{summary[1:]}. {details}"
+    )
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The command line's parser; light to build: it imports none of the library."""
     parser = _Parser(
         prog="spm-opt",
         description=_DESCRIPTION,
@@ -77,7 +97,14 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="count", default=0, help=_VERBOSE)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    reproduce = commands.add_parser("reproduce", help="reproduce the paper's Table III and Fig. 8")
+    reproduce = _command(
+        commands,
+        "reproduce",
+        "reproduce the paper with its cubic baseline: Tables III and IV, Figs. 8, 13 and 14",
+        "Writes each table as markdown and CSV, each figure as PNG, the baseline's "
+        "evaluation report (markdown and JSON) and its trajectory CSV; Table III is compared "
+        "value by value with the printed one.",
+    )
     reproduce.add_argument(
         "--out",
         required=True,
@@ -91,13 +118,19 @@ def _parser() -> argparse.ArgumentParser:
         help=f"the paper's problem file (default: {PAPER_PROBLEM})",
     )
 
-    plan = commands.add_parser("plan", help="plan a problem and write the trajectory CSV")
+    plan = _command(
+        commands,
+        "plan",
+        "plan a problem with one planner and write the trajectory CSV and its sidecar",
+        "The CSV samples the plan at --rate; the JSON sidecar beside it records the "
+        "planner, the problem and the planner's statistics. Exits 1 if the planner fails.",
+    )
     plan.add_argument("problem", type=Path, help="problem TOML file")
     plan.add_argument(
         "--planner",
         default="cubic",
         metavar="NAME",
-        help=f"one of {', '.join(sorted(PLANNERS))} (default: cubic)",
+        help=f"one of {', '.join(PLANNER_NAMES)} (default: cubic)",
     )
     plan.add_argument(
         "--out",
@@ -110,18 +143,27 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=None,
         metavar="HZ",
-        help="sampling rate of the CSV, Hz (default 100, breakpoints included)",
+        help=f"how densely the CSV samples the plan, Hz, 0 < HZ <= {_PLAN_MAX_RATE_HZ:g} "
+        "(default 100, breakpoints included); not the control loop's rate: execute "
+        "interpolates the CSV at its own --rate",
     )
 
-    compare = commands.add_parser(
-        "compare", help="run every planner on a problem and compare them (table and figures)"
+    compare = _command(
+        commands,
+        "compare",
+        f"plan a problem with every planner but {', '.join(_NOT_COMPARED)} and compare them: "
+        "a table and figures",
+        f"Each plan is judged by the problem's limits; {', '.join(_NOT_COMPARED)} plans no "
+        "cut (a motion for identify) and runs only when --planners names it. Exits 1 if a "
+        "planner fails; the others' table and figures are written all the same.",
     )
     compare.add_argument("problem", type=Path, help="problem TOML file")
     compare.add_argument(
         "--planners",
         default=None,
         metavar="NAMES",
-        help="comma-separated planner names (default: every registered planner)",
+        help="comma-separated planner names, any that plan --planner takes (default: every "
+        f"one but {', '.join(_NOT_COMPARED)})",
     )
     compare.add_argument(
         "--out",
@@ -166,8 +208,14 @@ def _parser() -> argparse.ArgumentParser:
     _execute_parser(commands)
     _emulate_parser(commands)
 
-    sweep = commands.add_parser(
-        "sweep", help="run a parameter sweep (resumable) on a process pool or a Dask cluster"
+    sweep = _command(
+        commands,
+        "sweep",
+        "run a parameter sweep, resumable, on a process pool or a Dask cluster",
+        "Plans every task of the specification (its grid, random samples and flaps, each "
+        "with each of its planners) and writes each task's result, a table, a summary and "
+        "figures to --out; a second run there resumes, skipping the tasks done (see "
+        "--retry-failed).",
     )
     sweep.add_argument("spec", type=Path, help="sweep specification TOML (problems/sweeps/)")
     sweep.add_argument(
@@ -198,10 +246,13 @@ def _parser() -> argparse.ArgumentParser:
         "reasons: a worker killed, a lost connection, a timeout)",
     )
 
-    identify = commands.add_parser(
+    identify = _command(
+        commands,
         "identify",
-        help="identify the robot's parameters and its actuators' loops from execution logs "
-        "(a robot TOML)",
+        "identify the robot's parameters and its actuators' loops from execution logs",
+        "Fits them to the logs with the problem's robot as the prior, and writes the "
+        "identified robot file (TOML) with its report (.md) and a figure of the torques "
+        "predicted (.png) beside it.",
     )
     identify.add_argument("logs", nargs="+", type=Path, help="execution log CSV files")
     identify.add_argument(
@@ -238,8 +289,12 @@ def _parser() -> argparse.ArgumentParser:
         help="samples slower than this are left out, rad/s (default 0.02)",
     )
 
-    evaluate = commands.add_parser(
-        "evaluate", help="judge a trajectory CSV, or the run an execution log records, by a problem"
+    evaluate = _command(
+        commands,
+        "evaluate",
+        "judge a trajectory CSV, or the run an execution log records, by a problem's limits",
+        "Prints the report (markdown, or JSON with --json); exits 1 if the plan or the run "
+        "breaks a limit.",
     )
     evaluate.add_argument("problem", type=Path, help="problem TOML file")
     evaluate.add_argument(
@@ -262,8 +317,12 @@ def _parser() -> argparse.ArgumentParser:
         help="judge a plan or a log under PROBLEM though it was made for (ran under) another, "
         "or records none (default: refused)",
     )
-    cache = commands.add_parser(
-        "cache", help="the cache of compiled libraries: what it holds, or clear it"
+    cache = _command(
+        commands,
+        "cache",
+        "show what the cache of compiled libraries holds, or clear it",
+        "The dynamics and the optimal-control planners compile their functions to C once "
+        "per machine and keep them there.",
     )
     cache.add_argument(
         "action",
@@ -280,10 +339,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _execute_parser(commands: argparse._SubParsersAction) -> None:
-    from spm_opt.execution.tracking import TRACKING_MODES
-
-    execute = commands.add_parser(
-        "execute", help="run a trajectory CSV on the simulated robot or the Dynamixel actuators"
+    execute = _command(
+        commands,
+        "execute",
+        "run a trajectory CSV on the simulated robot or the Dynamixel actuators, and log it",
+        "Checks the plan against --problem's limits first, then follows it in a control "
+        "loop at --rate and writes the execution log (CSV); exits 1 if the run ends in a "
+        "safe stop.",
     )
     execute.add_argument("plan", type=Path, help="trajectory CSV file (spm-opt plan --out)")
     execute.add_argument(
@@ -316,7 +378,10 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         type=float,
         default=100.0,
         metavar="HZ",
-        help="control loop rate, Hz (default 100)",
+        help="the control loop's rate, Hz, 1 <= HZ <= 2000 (default 100): each cycle reads "
+        "and writes both actuators over their serial bus (sim: the same loop); not the plan "
+        "CSV's sampling rate (plan --rate): the loop interpolates the plan between its "
+        "samples",
     )
     execute.add_argument(
         "--approach",
@@ -375,8 +440,12 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
 
 
 def _emulate_parser(commands: argparse._SubParsersAction) -> None:
-    emulate = commands.add_parser(
-        "emulate", help="two emulated L54 actuators on a pseudo-terminal (Protocol 2.0)"
+    emulate = _command(
+        commands,
+        "emulate",
+        "serve two emulated L54 actuators (Protocol 2.0) on a pseudo-terminal",
+        "Prints the pseudo-terminal's path, for execute --backend dynamixel --port, and "
+        "serves until Ctrl-C or SIGTERM; the actuators drive a simulated robot.",
     )
     emulate.add_argument(
         "--problem",
@@ -609,8 +678,10 @@ def _plan(args: argparse.Namespace) -> None:
 
     if args.out.suffix != ".csv":
         raise InputError(f"--out {args.out}: expected a file name ending in .csv")
-    if args.rate is not None and not 0.0 < args.rate <= 1e5:
-        raise InputError(f"--rate {args.rate}: expected a rate in Hz with 0 < rate <= 100000")
+    if args.rate is not None and not 0.0 < args.rate <= _PLAN_MAX_RATE_HZ:
+        raise InputError(
+            f"--rate {args.rate}: expected a rate in Hz with 0 < rate <= {_PLAN_MAX_RATE_HZ:g}"
+        )
     check_output_file(args.out, "--out")
     get_planner(args.planner)
     problem = load_problem(args.problem)

@@ -11,7 +11,7 @@ import difflib
 import math
 import re
 import tomllib
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -170,11 +170,10 @@ class Table:
         if key in self._data:
             return self._data[key]
         if default is _REQUIRED:
-            strays = [k for k in self._data if k not in self._taken]
-            close = difflib.get_close_matches(key, strays, n=1, cutoff=0.6)
-            if close:
+            close = closest(key, [k for k in self._data if k not in self._taken])
+            if close is not None:
                 raise InputError(
-                    f"{self.name(close[0])}: unknown key; did you mean '{key}'? "
+                    f"{self.name(close)}: unknown key; did you mean '{key}'? "
                     "(keys carry their unit, e.g. _mm, _s, _deg)"
                 )
             raise InputError(f"{self.name(key)}: missing (required)")
@@ -300,13 +299,20 @@ class Table:
         """Raise on the first key nobody asked for, suggesting the closest known key."""
         for key in self._data:
             if key not in self._taken:
-                close = difflib.get_close_matches(key, sorted(self._taken), n=1, cutoff=0.6)
-                hint = f"; did you mean '{close[0]}'?" if close else ""
+                close = closest(key, sorted(self._taken))
+                hint = f"; did you mean '{close}'?" if close is not None else ""
                 allowed = ", ".join(sorted(self._taken)) or "none"
                 raise InputError(
                     f"{self.name(key)}: unknown key{hint} (allowed here: {allowed}; "
                     "keys carry their unit, e.g. _mm, _s, _deg)"
                 )
+
+
+def closest(word: str, known: Iterable[str]) -> str | None:
+    """The one of ``known`` closest to ``word``, a likely typo of it, or None if none is
+    close (the "did you mean" of every unknown key or name)."""
+    close = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
+    return close[0] if close else None
 
 
 def _bounds_text(minimum: float | None, maximum: float | None, exclusive_minimum: bool) -> str:

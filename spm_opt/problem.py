@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -34,6 +35,7 @@ from spm_opt.skull.problem_keys import markup_landmarks, read_skull_table, skull
 from spm_opt.skull.smooth_radius import SmoothRadius
 from spm_opt.skull.surface import Skull, SkullSurface
 
+_LOG = logging.getLogger(__name__)
 _SAME_DIRECTION_RAD = 1e-6
 MIN_SEGMENT_DURATION_S = 0.01
 MAX_SEGMENT_DURATION_S = 3600.0
@@ -51,6 +53,14 @@ gives none, s (the planners keep the room it needs: :mod:`spm_opt.hold_room`, wh
 cost of shorter bounds is measured)."""
 MAX_HOLD_WITHIN_S = 60.0
 """Longest hold bound accepted, s: a stop that takes longer is no hold."""
+PLAUSIBLE_CONTOUR_TOLERANCE_MM = (0.03, 2.0)
+"""The contour tolerances a craniotomy plausibly asks for, mm; a file's value outside is
+accepted with a warning (it is likelier a slip of units, µm or m for mm, than meant).
+Narrower than 0.03 mm, execution alone uses the tube up: the executed cut strays up to
+0.025 mm farther from the contour than the plan (:data:`DEFAULT_EXECUTION_RESERVE_MM`).
+Wider than 2 mm, wider than the kerf of a craniotome's cutter (1.5 to 2 mm across): a cut
+off by more misses the planned outline by more than its own width, and the flap no longer
+fits back in its opening."""
 
 INNER_REACH_MARGIN = 0.05
 """How far past the landmark farthest from the flap's mean direction the inner surface's
@@ -72,7 +82,8 @@ class Limits:
     max_tool_speed : float or None, m/s
         Speed of the cut point along the skull.
     contour_tolerance : float or None, m
-        Largest allowed distance of the cut point from the planned contour.
+        Largest allowed distance of the cut point from the planned contour (a file's value
+        outside :data:`PLAUSIBLE_CONTOUR_TOLERANCE_MM` loads with a warning).
     max_joint_torque : float or None, N·m
         Largest actuator torque (default in files: the actuator's continuous torque).
     execution_reserve : float, m
@@ -482,6 +493,15 @@ def _limits(table: Table, robot: Robot) -> Limits:
         )
     tool_speed = table.number("max_tool_speed_mm_s", **positive)
     tolerance = table.number("contour_tolerance_mm", **positive)
+    low, high = PLAUSIBLE_CONTOUR_TOLERANCE_MM
+    if tolerance is not None and not low <= tolerance <= high:
+        _LOG.warning(
+            "%s = %g: outside the plausible range for a craniotomy, %g to %g mm (units?)",
+            table.name("contour_tolerance_mm"),
+            tolerance,
+            low,
+            high,
+        )
     torque = table.number("max_joint_torque_nm", **positive)
     actuator_torque = robot.actuator.continuous_torque_nm
     if torque is not None and torque > actuator_torque * (1 + 1e-9):

@@ -1,6 +1,7 @@
 """Problem and robot files: the shipped ones load, and a problem checks itself."""
 
 import dataclasses
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 
 import spm_opt as so
 from spm_opt.model.params import MM
+from spm_opt.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM
 
 PROBLEMS = sorted((Path(__file__).resolve().parents[1] / "problems").glob("*.toml"))
 
@@ -84,6 +86,29 @@ def test_overrides_replace_values_before_validation():
         so.load_problem(path, {"limits.max_tool_sped_mm_s": 5.0})
     with pytest.raises(so.InputError, match="override name.x: name is not a table"):
         so.load_problem(path, {"name.x": 1})
+
+
+@pytest.mark.parametrize(
+    ("tolerance_mm", "warned"),
+    [(100.0, True), (2.5, True), (2.0, False), (0.1, False), (0.03, False), (0.0001, True)],
+)
+def test_an_implausible_contour_tolerance_is_loaded_with_a_warning(
+    tolerance_mm, warned, caplog: pytest.LogCaptureFixture
+):
+    """Outside the plausible range, one warning line names the key, the value and the
+    range; the value is kept (only zero and less are refused)."""
+    paper = Path(__file__).resolve().parents[1] / "problems" / "craniotomy_bone_flap.toml"
+    with caplog.at_level(logging.WARNING, logger="spm_opt"):
+        problem = so.load_problem(paper, {"limits.contour_tolerance_mm": tolerance_mm})
+    assert problem.limits.contour_tolerance == pytest.approx(tolerance_mm * 1e-3)
+    messages = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    if not warned:
+        assert messages == []
+        return
+    low, high = PLAUSIBLE_CONTOUR_TOLERANCE_MM
+    (message,) = messages
+    assert f"limits.contour_tolerance_mm = {tolerance_mm:g}" in message, message
+    assert f"{low:g} to {high:g} mm" in message and "\n" not in message, message
 
 
 def test_the_execution_reserve_is_part_of_the_tolerance():

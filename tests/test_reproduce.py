@@ -3,9 +3,11 @@ breaks the paper's own conditions."""
 
 import csv
 import math
+import re
 
 import numpy as np
 import pytest
+from test_cli_startup import command_summaries
 
 from spm_opt import paper
 from spm_opt.cli import main
@@ -113,6 +115,12 @@ def test_reproduce_command_writes_tables_figures_and_report(tmp_path, paper_prob
     assert not [p for p in out.iterdir() if p.name.startswith(".")]
     assert "and 1 disagrees." in (out / "table3.md").read_text()
     assert all(math.isfinite(float(r["ours"])) for r in table)
+    tables = sorted(int(p.stem.removeprefix("table")) for p in out.glob("table*.csv"))
+    figures = sorted({int(re.match(r"fig(\d+)_", p.name)[1]) for p in out.glob("fig*.png")})
+    roman = {3: "III", 4: "IV"}
+    said = command_summaries()["reproduce"]  # its line in spm-opt --help
+    assert f"Tables {' and '.join(roman[n] for n in tables)}" in said, said
+    assert f"Figs. {', '.join(map(str, figures[:-1]))} and {figures[-1]}" in said, said
 
 
 def test_table_iv_matches_the_paper_and_both_checks(paper_problem, baseline):

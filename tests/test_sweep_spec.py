@@ -299,6 +299,10 @@ def test_bad_flap_tables_are_one_line_errors(tmp_path, edit, expected):
             ('["cubic", "ruckig"]', '["cubic", "fast"]'),
             "planners = ['cubic', 'fast']: expected a non-empty list of",
         ),
+        (
+            ('["cubic", "ruckig"]', '["cubic", "toppr"]'),
+            "toppra ('toppr': did you mean 'toppra'?)",
+        ),
         (('planners = ["cubic", "ruckig"]', 'planner = ["cubic"]'), "planner: unknown key"),
         (
             ('"robot.friction.mu" = [0.04, 0.24]', '"robot" = ["robots/prototype.toml"]'),
@@ -319,6 +323,7 @@ def test_bad_flap_tables_are_one_line_errors(tmp_path, edit, expected):
         "no-samples",
         "fractional",
         "unknown-planner",
+        "planner-typo",
         "typo-key",
         "robot-file",
         "no-problem",

@@ -31,6 +31,7 @@ import tomli_w
 from spm_opt.fields import KeyRecord, recording
 from spm_opt.model.params import load_robot
 from spm_opt.planners import PLANNERS
+from spm_opt.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM as _TOLERANCE_MM
 from spm_opt.problem import load_problem
 from spm_opt.sweep.spec import load_sweep_spec
 
@@ -106,7 +107,11 @@ NOTES = {
     ("problem", "limits.max_tool_speed_mm_s"): "Speed of the cut point along the skull. "
     "Absent: not limited.",
     ("problem", "limits.contour_tolerance_mm"): "Largest distance of the cut from the planned "
-    "contour. Absent: landmarks must be met within 0.1 mm and the tube is not checked.",
+    "contour. Absent: landmarks must be met within 0.1 mm and the tube is not checked. "
+    f"Plausible: {_TOLERANCE_MM[0]:g} to {_TOLERANCE_MM[1]:g} mm; outside, a warning (a slip "
+    "of units?): narrower, execution alone uses the tube up (the executed cut strays up to "
+    "0.025 mm farther than the plan); wider, the cut may miss its outline by more than a "
+    "craniotome's kerf (1.5 to 2 mm), and the flap no longer fits back.",
     ("problem", "limits.max_joint_torque_nm"): "Absent: the actuator's continuous torque "
     "(14 N·m); at most that.",
     ("problem", "limits.execution_reserve_mm"): "The part of the tolerance a plan leaves for "

@@ -31,13 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spm_opt.choices import TRACKING_MODES
 from spm_opt.limits import RULES
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import Robot
 from spm_opt.trajectory import Trajectory
-
-TRACKING_MODES = ("lead", "none")
-"""``lead``: goals lead the loop's lag; ``none``: the goal is the reference itself."""
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ import time
 from typing import Any, Protocol, TypeVar
 
 from spm_opt.errors import InputError, PlanningError, UnknownPlannerError
+from spm_opt.fields import closest
 from spm_opt.input_limits import excerpt
 from spm_opt.problem import Problem
 from spm_opt.skull.depth import depth_setpoint
@@ -43,12 +44,15 @@ def register(planner: Planner) -> Planner:
 
 
 def get_planner(name: str) -> Planner:
-    """The planner called ``name``, or an error listing the known names."""
+    """The planner called ``name``, or an error suggesting the closest known name (a typo
+    of it) and listing them all."""
     try:
         return PLANNERS[name]
     except KeyError:
+        close = closest(name, sorted(PLANNERS)) if isinstance(name, str) else None
+        hint = "" if close is None else f" (did you mean {close!r}?)"
         raise UnknownPlannerError(
-            f"planner = {name!r}: unknown; expected one of {', '.join(sorted(PLANNERS))}"
+            f"planner = {name!r}: unknown{hint}; expected one of {', '.join(sorted(PLANNERS))}"
         ) from None
 
 

@@ -52,8 +52,9 @@ from typing import Any
 
 import numpy as np
 
+from spm_opt.choices import DEFAULT_MAX_TASKS
 from spm_opt.errors import InputError
-from spm_opt.fields import Table, read_toml
+from spm_opt.fields import Table, closest, read_toml
 from spm_opt.input_limits import excerpt
 from spm_opt.planners import PLANNERS
 from spm_opt.planners.registry import takes_warm_start
@@ -82,9 +83,6 @@ FLAP_LIMITS = {
     "max_tool_speed_mm_s": "limits.max_tool_speed_mm_s",
 }
 """The ``[flaps]`` keys that draw a limit per flap, and the problem's key each sets."""
-DEFAULT_MAX_TASKS = 100_000
-"""Most tasks a sweep may have unless its caller allows more (``max_tasks``): the shipped
-sweeps have 24 to 1,200; at seconds to minutes a task, 100,000 take days on a cluster."""
 LANDMARKS = (3, 12)
 """The fewest and the most landmarks a ``[flaps]`` table may ask for."""
 
@@ -245,8 +243,14 @@ def load_sweep_spec(path: str | Path, max_tasks: int = DEFAULT_MAX_TASKS) -> Swe
         or not planners
         or not all(isinstance(p, str) and p in PLANNERS for p in planners)
     ):
+        names = planners if isinstance(planners, list) else []
+        unknown = next((p for p in names if isinstance(p, str) and p not in PLANNERS), "")
+        close = closest(unknown, sorted(PLANNERS))
+        hint = "" if close is None else f" ({unknown!r}: did you mean {close!r}?)"
         raise root.error(
-            "planners", planners, f"expected a non-empty list of {', '.join(sorted(PLANNERS))}"
+            "planners",
+            planners,
+            f"expected a non-empty list of {', '.join(sorted(PLANNERS))}{hint}",
         )
     twice = next((name for i, name in enumerate(planners) if name in planners[:i]), None)
     if twice is not None:
