@@ -172,8 +172,14 @@ def _parser() -> argparse.ArgumentParser:
         help="directory for the table and figures (made if missing)",
     )
 
-    review = commands.add_parser(
-        "review", help="a plan in 3-D on the skull with the robot: review.html and review.png"
+    review = _command(
+        commands,
+        "review",
+        "show a plan (and its run) in 3-D on the skull with the robot, beside the judge's "
+        "verdicts: review.html and review.png",
+        "Each cut is judged as spm-opt evaluate judges it, in its own tube (the plan's: the "
+        "contour tolerance less the execution reserve; the executed cut's: the whole), and "
+        "each violation is listed and marked on the cut.",
     )
     review.add_argument("problem", type=Path, help="problem TOML file")
     review.add_argument("plan", type=Path, help="trajectory CSV file (spm-opt plan --out)")

@@ -89,10 +89,10 @@ def test_the_parsers_names_are_the_librarys() -> None:
     assert TRACKING_MODES is choices.TRACKING_MODES
 
 
-@pytest.mark.parametrize("name", sorted(set(_commands()) - {"review"}))
+@pytest.mark.parametrize("name", sorted(_commands()))
 def test_each_command_says_what_it_does(name: str) -> None:
     """Its line in ``spm-opt --help`` is a phrase, and ``spm-opt NAME --help`` opens with it
-    as a sentence and goes on (``review``'s texts are another change's)."""
+    as a sentence and goes on."""
     summary, description = command_summaries()[name], _commands()[name].description
     assert summary and summary[0].islower() and not summary.endswith("."), summary
     opening = f"{summary[0].upper()}{summary[1:]}. "
