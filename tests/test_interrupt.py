@@ -106,7 +106,7 @@ def _assert_stopped(status: int, lines: list[str], out: Path) -> None:
         assert not [p for p in out.parent.iterdir() if p.name.endswith(".tmp")]
 
 
-@pytest.mark.parametrize("module", ["numpy", "scipy.interpolate", "casadi", "pandas"])
+@pytest.mark.parametrize("module", ["numpy", "scipy.interpolate", "casadi", "spm_opt.planners"])
 def test_sigint_while_the_command_imports_is_one_line_and_130(tmp_path, module):
     """``-X importtime`` writes a line as each module's import ends: the signal goes out
     when the one named has been imported, while the modules that import it still are."""
