@@ -330,6 +330,23 @@ def test_each_headline_panel_draws_its_limit_or_says_it_has_none(
     assert f"executed cut's tube {tubes[1]:.4g} mm" in deviation
 
 
+def test_a_problem_without_a_tube_or_a_tool_speed_limit_says_so_in_its_panels(
+    hardware_problem: so.Problem,
+) -> None:
+    """The hardware run cuts nothing: no contour tolerance, no tool speed limit."""
+    assert hardware_problem.limits.contour_tolerance is None
+    assert hardware_problem.limits.max_tool_speed is None
+    figure = comparison_figures.headline(hardware_problem, [run_planner(hardware_problem, "cubic")])
+    assert figure_faults(figure) == []
+    panels = {axis.get_title().splitlines()[0]: axis for axis in figure.axes}
+    for title, words in (
+        ("max contour deviation (mm)", "no tube"),
+        ("max tool speed (mm/s)", "no limit"),
+    ):
+        assert _horizontal_lines(panels[title]) == []
+        assert words in panels[title].get_title()
+
+
 @pytest.mark.parametrize("planner", ["cubic", "ocp-min-jerk"])
 def test_the_torques_run_to_the_plans_ends_without_a_drop_to_rest(
     paper_problem: so.Problem, planner: str

@@ -275,6 +275,8 @@ def _headline_notes(problem: Problem) -> dict[str, str]:
         + ("" if jerk is None else f" (the {jerk:.4g} rad/s³ limit bounds the peak)"),
         "effort_n2m2s": "no limit",
         "violation_count": "a clean plan has 0",
+        "max_tool_speed_mm_s": "no limit: the problem sets none",
+        "max_contour_deviation_mm": "no tube: the problem sets no contour tolerance",
     }
 
 
