@@ -33,7 +33,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -191,13 +191,20 @@ def library_path(compiler_path: str, key: str) -> Path:
     return cache_directory() / f"nlp_{digest}"
 
 
+WAIT_POLL_S = 0.05
+"""How often :func:`wait_for_builds` looks whether the builds are done, s."""
+
+
 def wait_for_builds() -> None:
-    """Wait until every build this process started has finished (or failed)."""
+    """Wait until every build this process started has finished (or failed). It sleeps
+    between looks rather than waiting on the futures' locks: a Ctrl-C then lands in a
+    sleep, never while the wait holds a lock the build thread needs to finish."""
     with _lock:
         pending = [build for build in _builds.values() if not build.done()]
     if pending:
         _LOG.info("waiting for the libraries compiling in the background (%d)", len(pending))
-    wait(pending)
+    while not all(build.done() for build in pending):
+        time.sleep(WAIT_POLL_S)
 
 
 def _start_build(
