@@ -10,7 +10,7 @@ shares: the first ``load_problem``, the Lagrange dynamics model and the compiled
 torque. Then, for every ``problems/*.toml`` and every planner, one plan (not timed) and:
 
 - samples: points of the evaluation grid at ``--rate`` (default 1 kHz, the evaluator's).
-- cold ms: the first ``spm_opt.evaluate`` of the plan on a freshly loaded problem, which
+- cold ms: the first ``spm_opt.judge.evaluate`` of the plan on a freshly loaded problem, which
   pays for the problem's caches (its contour and the duration lower bound).
 - best ms, median ms: the best and the median of ``--repeats`` further calls on the same
   problem, each on a fresh ``copy.deepcopy`` of the plan (made outside the timing): the
@@ -36,8 +36,7 @@ from pathlib import Path
 from statistics import median
 from typing import Any
 
-import numpy as np
-from timing import ROOT, write_results
+from timing import ROOT, warm_up, write_results
 
 import spm_opt as so
 from spm_opt.model import dynamics
@@ -49,22 +48,6 @@ def progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def warm_up(path: Path) -> dict[str, float]:
-    """Pay, once and timed, for what every evaluation shares."""
-    timings = {}
-    started = time.perf_counter()
-    problem = so.load_problem(path)
-    timings["first load_problem"] = time.perf_counter() - started
-    started = time.perf_counter()
-    dynamics._model()
-    timings["dynamics model"] = time.perf_counter() - started
-    started = time.perf_counter()
-    zeros = np.zeros((1, 2))
-    so.inverse_dynamics(problem.robot, zeros, zeros, zeros)
-    timings["compiled torque"] = time.perf_counter() - started
-    return timings
-
-
 def seconds(work: Callable[[], object]) -> float:
     """Wall time, s, of one ``work()``."""
     started = time.perf_counter()
@@ -73,7 +56,7 @@ def seconds(work: Callable[[], object]) -> float:
 
 
 def judge_time(problem: so.Problem, trajectory: so.Trajectory, rate_hz: float) -> float:
-    """Wall time, s, of one ``spm_opt.evaluate`` of a fresh copy of ``trajectory`` (its
+    """Wall time, s, of one ``spm_opt.judge.evaluate`` of a fresh copy of ``trajectory`` (its
     report not yet kept)."""
     fresh = copy.deepcopy(trajectory)
     return seconds(lambda: so.evaluate(problem, fresh, rate_hz))

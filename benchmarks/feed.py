@@ -5,9 +5,11 @@ cycle computed before the feed existed: the reference), the pace itself when not
 changes, the cycle in which a hold from full feed is planned (ruckig, its bounds from the
 plan's derivatives, its check), and the costliest such cycle on toppra's time-optimal plan
 (of 100 plan times: the change from the plan's derivatives finds no room and reference
-stops are checked in turn, :mod:`spm_opt.hold_room`). Once per run: the feed ceiling (a
-bisection of the evaluator on the plan run faster) against one evaluation of the plan (the
-pre-flight check).
+stops are checked in turn, :mod:`spm_opt.judge.hold_room`). Once per run: the feed ceiling
+(bisected on how the plan's limits scale with the feed, :mod:`spm_opt.judge.paced`, then
+judged once by the evaluator at the pace found) and the executor's whole pre-flight (the
+plan's check, then its ceiling, of a fresh copy of the plan), against one evaluation of the
+plan.
 
     python benchmarks/feed.py [--repeats 5]
 
@@ -22,8 +24,10 @@ import numpy as np
 from timing import ROOT, best_of, write_results
 
 import spm_opt as so
-from spm_opt.execution import ExecutionSettings
-from spm_opt.execution.feed import FeedProfile, feed_ceiling
+from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+from spm_opt.execution.ceiling import feed_ceiling
+from spm_opt.execution.feed import FeedProfile
+from spm_opt.execution.tracking import Lead
 
 PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
 CYCLES = 200
@@ -50,6 +54,16 @@ def costliest_hold(problem: so.Problem, plan: so.Trajectory) -> float:
     times = np.linspace(0.0, plan.duration, 100, endpoint=False)
     costs = [best_of(1, lambda t=t: profile(problem, plan).advance(t, 0.0)) for t in times]
     return float(times[int(np.argmax(costs))])
+
+
+def preflight(problem: so.Problem, plan: so.Trajectory) -> float:
+    """The executor's pre-flight of ``plan``: its check, then its feed ceiling (the
+    default settings' ``max_feed``, the goals' lead); returns the ceiling."""
+    settings = ExecutionSettings()
+    executor = Executor(problem, SimulatedRobot(problem.robot), settings)
+    executor.check_plan(plan)
+    lead = Lead.for_actuator(problem.robot.actuator, 1.0 / settings.rate_hz, settings.tracking)
+    return feed_ceiling(problem, plan, settings.max_feed, lead)
 
 
 def main() -> int:
@@ -83,6 +97,9 @@ def main() -> int:
             args.repeats, lambda: so.evaluate(problem, cubic.time_scaled(1.0))
         ),
         "feed ceiling, up to 1.5": best_of(args.repeats, lambda: feed_ceiling(problem, cubic, 1.5)),
+        "pre-flight: plan check + ceiling": best_of(
+            args.repeats, lambda: preflight(problem, cubic.time_scaled(1.0))
+        ),
     }
     results = {"per_cycle_us": {}, "per_run_s": {}}
     print(f"{'per control cycle':40s} {'µs':>10s} {'ratio':>8s}")

@@ -11,7 +11,7 @@ at even azimuths counterclockwise seen from outside the skull, with segment dura
 the sweeps' mean tool speed (two thirds of the tool-speed limit; the bound of
 ``ocp-min-energy`` and the total of ``ocp-min-jerk``). Per flap and planner: one cold plan
 (not timed: it pays for the NLP's construction), then ``--repeats`` warm ``spm_opt.plan``
-followed by ``spm_opt.evaluate`` of the returned plan, as a user judges it; the table has
+followed by ``spm_opt.judge.evaluate`` of the returned plan, as a user judges it; the table has
 their median wall time, the median solver iterations (ocp-* planners: IPOPT's or FATROP's)
 and the plan's duration. The last columns are each planner's median time per segment
 against the first flap's: growth no faster than linear in the segments keeps that ratio
@@ -32,8 +32,8 @@ from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.model.params import MM
-from spm_opt.problem import Problem
-from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION
+from spm_opt.problem.problem import Problem
+from spm_opt.studies.sweep.flaps import DURATION_SPEED_FRACTION
 
 PAPER = ROOT / "problems" / "craniotomy_bone_flap.toml"
 DEFAULT_PLANNERS = ("toppra", "ocp-min-time", "ocp-min-energy", "ocp-min-jerk", "ocp-mix")

@@ -23,8 +23,8 @@ from timing import ROOT, best_of, write_results
 
 import spm_opt as so
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
-from spm_opt.identify import identify
-from spm_opt.identify_samples import log_samples
+from spm_opt.identify.estimate import identify
+from spm_opt.identify.samples import log_samples
 from spm_opt.model.params import load_robot
 from spm_opt.model.regressor import regressor
 from spm_opt.planners.excitation import with_length

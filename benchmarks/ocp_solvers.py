@@ -28,7 +28,7 @@ import numpy as np
 from timing import ROOT, write_results
 
 import spm_opt as so
-from spm_opt.limits import planner_bounds
+from spm_opt.judge.limits import planner_bounds
 from spm_opt.model.joint_torque import range_key
 from spm_opt.planners.ocp import ipopt, nlp_library
 from spm_opt.planners.ocp.bounds import nlp_bounds

@@ -30,11 +30,11 @@ batch torque. Then, per planner, a freshly loaded problem and:
 - first s: wall time of the first ``spm_opt.plan`` on the fresh problem (cold: with the
   construction above and the problem's lazily computed contour and inverse kinematics).
 - median s: median wall time of ``--repeats`` further ``spm_opt.plan`` calls (warm).
-- judge s: median wall time of ``spm_opt.evaluate`` of a fresh ``copy.deepcopy`` of each
+- judge s: median wall time of ``spm_opt.judge.evaluate`` of a fresh ``copy.deepcopy`` of each
   warm plan (made outside the timing): the evaluator keeps each trajectory object's report,
   and a copy is judged anew (the JSON's ``judge_s`` has every call's).
 - plan+judge s: median wall time of ``plan = spm_opt.plan(problem, name)`` then
-  ``spm_opt.evaluate(problem, plan)``, as a user runs them (the warm plans above, each
+  ``spm_opt.judge.evaluate(problem, plan)``, as a user runs them (the warm plans above, each
   judged after its plan's time was taken; ``plan_judge_s``): a planner that judged its own
   plan (the ocp-* planners do) leaves its report, and the second call only copies it.
 - solver s: median of the statistics' ``solve_time_s`` (IPOPT's wall time for the ocp-*
@@ -42,7 +42,7 @@ batch torque. Then, per planner, a freshly loaded problem and:
 - f-eval s, iters (ocp-* only): median time IPOPT spent evaluating the NLP's functions and
   derivatives (``function_time_s``), and median IPOPT iterations.
 - duration s, over bound: the plan's duration and ``duration_over_lower_bound``, from
-  ``spm_opt.evaluate`` of the cold plan, once, outside the timing.
+  ``spm_opt.judge.evaluate`` of the cold plan, once, outside the timing.
 - ratio: median s over the cubic's median s.
 
 Under the table, for each ocp-* planner (its transcription, its solver and its NLP's size:
@@ -68,11 +68,9 @@ from statistics import median
 from typing import Any
 
 import casadi as ca
-import numpy as np
-from timing import ROOT, write_results
+from timing import ROOT, warm_up, write_results
 
 import spm_opt as so
-from spm_opt.model import dynamics
 from spm_opt.planners.ocp import ipopt, nlp, nlp_library, path_nlp, path_solver, refinement
 from spm_opt.planners.ocp.planner import OcpPlanner
 
@@ -94,22 +92,6 @@ def names_option(parser: argparse.ArgumentParser, text: str | None) -> list[str]
             f"unknown planner(s) {', '.join(unknown)}; expected some of {', '.join(so.PLANNERS)}"
         )
     return names
-
-
-def warm_up(path: Path) -> dict[str, float]:
-    """Pay, once and timed, for what every planner and the evaluator share."""
-    timings = {}
-    started = time.perf_counter()
-    problem = so.load_problem(path)
-    timings["first load_problem"] = time.perf_counter() - started
-    started = time.perf_counter()
-    dynamics._model()
-    timings["dynamics model"] = time.perf_counter() - started
-    started = time.perf_counter()
-    zeros = np.zeros((1, 2))
-    so.inverse_dynamics(problem.robot, zeros, zeros, zeros)
-    timings["compiled torque"] = time.perf_counter() - started
-    return timings
 
 
 def clear_ocp_caches() -> None:
@@ -213,7 +195,7 @@ def measure(name: str, path: Path, repeats: int, phase: list[str]) -> dict[str, 
 
 
 def judge_time(problem: so.Problem, trajectory: so.Trajectory) -> float:
-    """Wall time, s, of ``spm_opt.evaluate`` of a fresh copy of ``trajectory`` (its report
+    """Wall time, s, of ``spm_opt.judge.evaluate`` of a fresh copy of ``trajectory`` (its report
     not yet kept)."""
     fresh = copy.deepcopy(trajectory)
     started = time.perf_counter()

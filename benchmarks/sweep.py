@@ -7,14 +7,15 @@ Prints a table (progress goes to stderr) and writes benchmarks/results/sweep.jso
 
 NAMES are comma-separated planner names (default: cubic, toppra, ocp-min-time); COUNTS
 comma-separated worker counts (default: 1,2; the first is the reference of the ratios).
-Each planner's sweep is the paper's problem with ``limits.max_tool_speed_mm_s`` at N
-values evenly spaced from 2 to 4 mm/s (default N = 16), each task planned and evaluated by
-:func:`spm_opt.sweep.task.run_task` through :func:`spm_opt.sweep.runner.run_sweep`, as
-``spm-opt sweep`` does: with 1 worker in the runner's process, with more on its process
-pool. Every run is a fresh Python process, so that none inherits another's warm caches
-(imports, compiled functions, the optimal-control solvers). Each planner's runs are
-interleaved (1, 2, 1, 2 workers...) R times (default 2) and each column is the best of its
-R values: on a machine shared with other work, the least disturbed (the JSON has them all).
+Each planner's sweep is the paper's problem with ``limits.max_tool_speed_mm_s`` at N values
+evenly spaced from 2 to 4 mm/s (default N = 16), each task planned and evaluated by
+:func:`spm_opt.studies.sweep.task.run_task` through
+:func:`spm_opt.studies.sweep.runner.run_sweep`, as ``spm-opt sweep`` does: with 1 worker in
+the runner's process, with more on its process pool. Every run is a fresh Python process, so
+that none inherits another's warm caches (imports, compiled functions, the optimal-control
+solvers). Each planner's runs are interleaved (1, 2, 1, 2 workers...) R times (default 2)
+and each column is the best of its R values: on a machine shared with other work, the least
+disturbed (the JSON has them all).
 
 - total s, tasks/s: run_sweep's wall time, with the pool's start and every worker's cold
   first task, and N over it.
@@ -46,8 +47,8 @@ import numpy as np
 from timing import ROOT, write_results
 
 import spm_opt as so
-from spm_opt.sweep.runner import run_sweep
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.studies.sweep.runner import run_sweep
+from spm_opt.studies.sweep.spec import load_sweep_spec
 
 PLANNERS = ("cubic", "toppra", "ocp-min-time")
 PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"

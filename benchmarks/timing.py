@@ -1,4 +1,5 @@
-"""Shared by the benchmark scripts: best-of timing, the printed table and the JSON file."""
+"""Shared by the benchmark scripts: best-of timing, the timed warm-up, the printed table and the
+JSON file."""
 
 from __future__ import annotations
 
@@ -7,6 +8,11 @@ import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
+
+import spm_opt as so
+from spm_opt.model import dynamics
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -19,6 +25,23 @@ def best_of(repeats: int, work: Callable[[], object]) -> float:
         work()
         times.append(time.perf_counter() - start)
     return min(times)
+
+
+def warm_up(path: Path) -> dict[str, float]:
+    """Pay, once and timed, for what every planner and evaluation share: the first
+    ``load_problem`` of ``path``, the dynamics model and the compiled torque; s of each."""
+    timings = {}
+    started = time.perf_counter()
+    problem = so.load_problem(path)
+    timings["first load_problem"] = time.perf_counter() - started
+    started = time.perf_counter()
+    dynamics._model()
+    timings["dynamics model"] = time.perf_counter() - started
+    started = time.perf_counter()
+    zeros = np.zeros((1, 2))
+    so.inverse_dynamics(problem.robot, zeros, zeros, zeros)
+    timings["compiled torque"] = time.perf_counter() - started
+    return timings
 
 
 def throughput_table(

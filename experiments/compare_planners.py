@@ -17,10 +17,15 @@ from pathlib import Path
 import pandas as pd
 
 import spm_opt as so
-from spm_opt.comparison import comparison_table, progress_line, run_planners, write_comparison
-from spm_opt.files import write_atomically
+from spm_opt.base.files import write_atomically
+from spm_opt.base.markdown import markdown_table
 from spm_opt.report.columns import column
-from spm_opt.report.markdown import markdown_table
+from spm_opt.studies.comparison import (
+    comparison_table,
+    progress_line,
+    run_planners,
+    write_comparison,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHOWN = [

@@ -9,7 +9,7 @@ planner's plan runs on a robot that is not the planning model (the plant is
 encoder offsets; on the paper's problem also with its offsets at zero), once with goals
 equal to the plan (``--tracking none``) and once led by the loops' lag (``lead``). Each run
 is judged by the evaluator on its log and on the plant's true state
-(:func:`spm_opt.evaluate_execution.evaluate_log`): did it complete, how far the joints
+(:func:`spm_opt.verify.executed_cut.evaluate_log`): did it complete, how far the joints
 were from the plan (the true tracking error) and how far the true cut was from the
 contour. ``--backend emulator`` runs the same through the real Dynamixel SDK against the
 emulated actuators, in real time (about two minutes; keep the machine otherwise idle:
@@ -34,12 +34,12 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 import spm_opt as so
-from spm_opt.evaluate_execution import evaluate_log
+from spm_opt.base.markdown import markdown_table
 from spm_opt.execution.backend import Backend
-from spm_opt.limits import contour_tube
+from spm_opt.judge.limits import contour_tube
 from spm_opt.model.params import DEG, MM, Robot
-from spm_opt.report.markdown import markdown_table
 from spm_opt.report.planner_style import labelled_handles
+from spm_opt.verify.executed_cut import evaluate_log
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")

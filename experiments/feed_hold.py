@@ -21,7 +21,7 @@ Measured for each hold, from the log and the plant's true state (its trace):
 
 The same holds, spread over all but the last 0.5 s of each, on toppra's and ocp-min-time's
 plans of problems/craniotomy_hardware.toml (made for it: at its joint limits less the room
-a hold within its ``hold_within_s`` needs, :mod:`spm_opt.hold_room`), summed up as the
+a hold within its ``hold_within_s`` needs, :mod:`spm_opt.judge.hold_room`), summed up as the
 least, median and largest time to rest.
 
     python experiments/feed_hold.py [--holds 20] [--optimal-holds N] [--out DIR]
@@ -43,12 +43,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import spm_opt as so
+from spm_opt.base.files import write_atomically
+from spm_opt.base.markdown import markdown_table
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
-from spm_opt.files import write_atomically
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM, load_robot
-from spm_opt.plots import to_png
-from spm_opt.report.markdown import markdown_table
+from spm_opt.report.plots import to_png
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

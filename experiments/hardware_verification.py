@@ -29,7 +29,7 @@ import numpy as np
 import spm_opt as so
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
 from spm_opt.model.params import load_robot
-from spm_opt.verify.hardware import write_verification
+from spm_opt.studies.hardware import write_verification
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"

@@ -34,18 +34,14 @@ import numpy as np
 import pandas as pd
 
 import spm_opt as so
+from spm_opt.base.markdown import markdown_table
 from spm_opt.cli import main as spm_opt_main
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
-from spm_opt.identify import (
-    IDENTIFIED_RELATIVE_ERROR,
-    identify,
-    prediction_rms,
-    true_base_parameters,
-)
-from spm_opt.identify_samples import log_samples
+from spm_opt.identify.estimate import IDENTIFIED_RELATIVE_ERROR, identify
+from spm_opt.identify.samples import log_samples
+from spm_opt.identify.validate import prediction_rms, true_base_parameters
 from spm_opt.model.params import load_robot
 from spm_opt.planners.excitation import with_length
-from spm_opt.report.markdown import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEM = ROOT / "problems" / "identification.toml"

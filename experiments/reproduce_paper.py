@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from spm_opt.reproduce import reproduce
+from spm_opt.studies.reproduce import reproduce
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,11 +17,9 @@ from __future__ import annotations
 
 import importlib
 import logging
-import sys
-import types
 from typing import TYPE_CHECKING, Any
 
-from spm_opt.errors import (
+from spm_opt.base.errors import (
     InputError,
     MissingDependency,
     PlanningError,
@@ -31,23 +29,24 @@ from spm_opt.errors import (
 )
 
 if TYPE_CHECKING:
-    from spm_opt.comparison import compare
-    from spm_opt.contour import Contour
-    from spm_opt.evaluate import Report, Violation, evaluate
+    from spm_opt.cut.contour import Contour
     from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute, read_log
+    from spm_opt.judge.report import Report, Violation
     from spm_opt.model.dynamics import inverse_dynamics, mechanical_energy
     from spm_opt.model.params import Robot, load_robot
     from spm_opt.planners import PLANNERS, plan
-    from spm_opt.problem import Limits, Problem, load_problem
-    from spm_opt.sweep.results import load_sweep
-    from spm_opt.trajectory import Trajectory
+    from spm_opt.problem.problem import Limits, Problem, load_problem
+    from spm_opt.problem.trajectory import Trajectory
+    from spm_opt.studies.comparison import compare
+    from spm_opt.studies.sweep.results import load_sweep
+    from spm_opt.verify.judgement import evaluate
 
 _HOMES = {
-    "compare": "spm_opt.comparison",
-    "Contour": "spm_opt.contour",
-    "Report": "spm_opt.evaluate",
-    "Violation": "spm_opt.evaluate",
-    "evaluate": "spm_opt.evaluate",
+    "compare": "spm_opt.studies.comparison",
+    "Contour": "spm_opt.cut.contour",
+    "Report": "spm_opt.judge.report",
+    "Violation": "spm_opt.judge.report",
+    "evaluate": "spm_opt.verify.judgement",
     "ExecutionSettings": "spm_opt.execution",
     "SimulatedRobot": "spm_opt.execution",
     "execute": "spm_opt.execution",
@@ -58,11 +57,11 @@ _HOMES = {
     "load_robot": "spm_opt.model.params",
     "PLANNERS": "spm_opt.planners",
     "plan": "spm_opt.planners",
-    "Limits": "spm_opt.problem",
-    "Problem": "spm_opt.problem",
-    "load_problem": "spm_opt.problem",
-    "load_sweep": "spm_opt.sweep.results",
-    "Trajectory": "spm_opt.trajectory",
+    "Limits": "spm_opt.problem.problem",
+    "Problem": "spm_opt.problem.problem",
+    "load_problem": "spm_opt.problem.problem",
+    "load_sweep": "spm_opt.studies.sweep.results",
+    "Trajectory": "spm_opt.problem.trajectory",
 }
 """The module each lazily imported name comes from."""
 
@@ -70,7 +69,7 @@ _HOMES = {
 def __getattr__(name: str) -> Any:
     """Import a public name from its module on first use (PEP 562)."""
     if name == "__version__":
-        from spm_opt.version import package_version
+        from spm_opt.base.version import package_version
 
         return package_version()
     if name not in _HOMES:
@@ -82,19 +81,6 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *_HOMES, "__version__"})
-
-
-class _Package(types.ModuleType):
-    """The package: importing a submodule named as a public name (``spm_opt.evaluate``,
-    the module of ``evaluate``) leaves that name to what it names (the function)."""
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if name in _HOMES and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
 
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -54,12 +54,12 @@ def hardware_plan(hardware_problem: so.Problem) -> so.Trajectory:
 
 @pytest.fixture(scope="session", autouse=True)
 def saved_figures_keep_the_rules() -> Iterator[None]:
-    """Every figure a test saves is first checked by :func:`spm_opt.figure_rules.
+    """Every figure a test saves is first checked by :func:`spm_opt.report.figure_rules.
     figure_faults` (units, titles, legends clear of the data, the anterior on top views):
     a figure that breaks a rule fails the test, its faults listed."""
     from matplotlib.figure import Figure
 
-    from spm_opt.figure_rules import figure_faults
+    from spm_opt.report.figure_rules import figure_faults
 
     save = Figure.savefig
 

@@ -14,7 +14,7 @@ nearby; it can only miss part of a peak, by about h × the next derivative (h = 
 speed 0.001 rad/s below its peak at the paper's 1 rad/s², 0.07 % of its speed limit).
 Rounding q to 1e-16 rad moves the third difference by at most 6 × 1e-16 / 2h³ = 3e-7 rad/s³.
 So every rate-type limit is allowed exactly the evaluator's
-:data:`~spm_opt.limits.RELATIVE_TOLERANCE`.
+:data:`~spm_opt.judge.limits.RELATIVE_TOLERANCE`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import spm_opt as so
-from spm_opt.limits import RELATIVE_TOLERANCE, contour_tube, path_tolerance, torque_limit
+from spm_opt.judge.limits import RELATIVE_TOLERANCE, contour_tube, path_tolerance, torque_limit
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import MM
 

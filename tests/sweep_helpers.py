@@ -15,9 +15,10 @@ from typing import Any
 
 import threadpoolctl
 
-from spm_opt.errors import InputError, PlanningError
-from spm_opt.sweep.runner import THREAD_VARIABLES, run_sweep
-from spm_opt.sweep.task import ProblemFiles, Task
+from spm_opt.base.errors import InputError, PlanningError
+from spm_opt.studies.sweep.pool import THREAD_VARIABLES
+from spm_opt.studies.sweep.runner import run_sweep
+from spm_opt.studies.sweep.task import ProblemFiles, Task
 
 NOWHERE = ProblemFiles("/nowhere.toml", "", "robot.toml", "")
 """The stand-in tasks' problem: none (their functions read no file)."""

@@ -22,8 +22,8 @@ from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
 import spm_opt.execution.emulator
-import spm_opt.identify
-import spm_opt.identify_loop
+import spm_opt.identify.estimate
+import spm_opt.identify.loop
 from spm_opt.execution.log import COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,7 +64,7 @@ def good(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def _swing_log(path: Path, rows: int = 3000) -> None:
     """A log of ``rows`` samples at 100 Hz, both joints swinging: enough for
-    :func:`spm_opt.identify_samples.log_samples`."""
+    :func:`spm_opt.identify.samples.log_samples`."""
     t = np.arange(rows) / 100.0
     swing = 0.2 * np.sin(2 * np.pi * 0.2 * t)
     table = pd.DataFrame({column: np.zeros(rows) for column in COLUMNS})
@@ -205,8 +205,8 @@ def no_long_runs(monkeypatch: pytest.MonkeyPatch) -> None:
         raise AssertionError("the emulator would serve: the bad file was accepted")
 
     monkeypatch.setattr(spm_opt.execution.emulator, "serve", served)
-    monkeypatch.setattr(spm_opt.identify, "identify", lambda robot, samples: None)
-    monkeypatch.setattr(spm_opt.identify_loop, "estimate_loops", lambda logs, robot: None)
+    monkeypatch.setattr(spm_opt.identify.estimate, "identify", lambda robot, samples: None)
+    monkeypatch.setattr(spm_opt.identify.loop, "estimate_loops", lambda logs, robot: None)
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 from test_bad_inputs import assert_one_error, run_cli
 
-from spm_opt import cli
-from spm_opt.errors import PlanningError
+from spm_opt.base.errors import PlanningError
+from spm_opt.base.version import package_version
+from spm_opt.cli.parser import EXIT_STATUSES, build_parser
 from spm_opt.planners import PLANNERS
-from spm_opt.version import package_version
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = str(ROOT / "problems" / "craniotomy_bone_flap.toml")
@@ -53,7 +53,7 @@ def test_version_names_the_installed_package(capsys: pytest.CaptureFixture[str])
 
 
 def test_every_optional_value_states_its_default_and_help_is_plain_text() -> None:
-    parser = cli._parser()
+    parser = build_parser()
     for command, action in _options(parser):
         help_text = action.help or ""
         assert "``" not in help_text, f"{command} {action.option_strings}: RST in help"
@@ -68,7 +68,7 @@ def test_every_optional_value_states_its_default_and_help_is_plain_text() -> Non
         assert stated, f"{command} {action.option_strings}: neither a default nor required"
     top = parser.format_help()
     assert "``" not in top
-    for status in cli.EXIT_STATUSES:
+    for status in EXIT_STATUSES:
         assert re.search(rf"^\s+{status}\s", top, re.MULTILINE), f"exit status {status} missing"
 
 

@@ -16,7 +16,9 @@ import pytest
 import spm_opt as so
 from spm_opt.cli import main
 
-EVALUATOR = importlib.import_module("spm_opt.evaluate")  # spm_opt.evaluate is the function
+EVALUATOR = importlib.import_module(
+    "spm_opt.judge.evaluate"
+)  # spm_opt.judge.evaluate is the function
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
@@ -75,7 +77,7 @@ def chatty_evaluator(monkeypatch: pytest.MonkeyPatch) -> None:
     evaluate = EVALUATOR.evaluate
 
     def chatty(problem, trajectory, **options):  # noqa: ANN001, ANN003, ANN202
-        log = logging.getLogger("spm_opt.evaluate")
+        log = logging.getLogger("spm_opt.judge.evaluate")
         log.debug("debug line")
         log.info("info line")
         log.warning("warning line")

@@ -15,7 +15,8 @@ from pathlib import Path
 import pytest
 from test_bad_inputs import assert_one_error, run_cli
 
-from spm_opt import choices, cli
+from spm_opt.base import choices
+from spm_opt.cli.parser import build_parser
 from spm_opt.execution import ExecutionSettings
 from spm_opt.execution.tracking import TRACKING_MODES
 from spm_opt.planners import PLANNERS, contour_planners
@@ -50,14 +51,14 @@ print(json.dumps({"status": status, "modules": sorted(sys.modules)}))
 
 
 def _commands() -> dict[str, argparse.ArgumentParser]:
-    parser = cli._parser()
+    parser = build_parser()
     action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return dict(action.choices)
 
 
 def command_summaries() -> dict[str, str]:
     """Each command's line in ``spm-opt --help``, by name."""
-    parser = cli._parser()
+    parser = build_parser()
     action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     return {choice.dest: choice.help for choice in action._choices_actions}
 

@@ -12,9 +12,9 @@ import pytest
 
 import spm_opt as so
 from spm_opt.cli import main
-from spm_opt.comparison import COLUMNS
 from spm_opt.model.params import MM
 from spm_opt.planners import PLANNERS
+from spm_opt.studies.comparison import COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 FAST = ["cubic", "ruckig", "toppra"]
@@ -169,7 +169,7 @@ def test_every_experiment_script_runs(tmp_path, command):
 
 def test_the_summary_says_which_plans_share_a_duration(paper_problem):
     """cubic and a copy of it share 40 s; toppra's time-optimal plan is shorter."""
-    from spm_opt.comparison import Outcome, comparison_markdown
+    from spm_opt.studies.comparison import Outcome, comparison_markdown
 
     cubic = so.plan(paper_problem, "cubic")
     toppra = so.plan(paper_problem, "toppra")
@@ -187,8 +187,8 @@ def test_the_summary_says_which_plans_share_a_duration(paper_problem):
 def test_the_summary_names_the_plans_tube_and_the_executed_cuts(paper_problem):
     """A plan is judged against the contour tolerance less the execution reserve, an
     executed cut against the whole: the limits and cubic's contour violation say which."""
-    from spm_opt.comparison import comparison_markdown, run_planner
-    from spm_opt.limits import contour_tube
+    from spm_opt.judge.limits import contour_tube
+    from spm_opt.studies.comparison import comparison_markdown, run_planner
 
     whole = contour_tube(paper_problem, executed=True) / MM
     plan = contour_tube(paper_problem) / MM
@@ -208,7 +208,7 @@ def test_the_summary_names_the_plans_tube_and_the_executed_cuts(paper_problem):
 
 
 def test_without_a_reserve_the_summary_names_one_tube(paper_problem):
-    from spm_opt.comparison import comparison_markdown, run_planner
+    from spm_opt.studies.comparison import comparison_markdown, run_planner
 
     limits = dataclasses.replace(paper_problem.limits, execution_reserve=0.0)
     problem = dataclasses.replace(paper_problem, limits=limits)

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spm_opt.contour import Contour
+from spm_opt.cut.contour import Contour
 
 R = 0.07  # m
 APEX_ANGLE = 0.5

@@ -7,8 +7,8 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 import spm_opt as so
-from spm_opt import paper
 from spm_opt.planners.cubic import absolute_time_coefficients
+from spm_opt.studies import paper
 
 
 def test_matches_the_papers_absolute_time_32x32_system(paper_problem, baseline):

@@ -19,15 +19,15 @@ from types import ModuleType
 import pytest
 
 import spm_opt.model.params
-import spm_opt.problem
-import spm_opt.sweep.spec
-from spm_opt.cli import EXIT_STATUSES
-from spm_opt.errors import InputError
-from spm_opt.fields import recording
+import spm_opt.problem.problem
+import spm_opt.studies.sweep.spec
+from spm_opt.base.errors import InputError
+from spm_opt.base.fields import recording
+from spm_opt.cli.parser import EXIT_STATUSES
 from spm_opt.model.params import load_robot
 from spm_opt.planners import PLANNERS
-from spm_opt.problem import load_problem
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.problem.problem import load_problem
+from spm_opt.studies.sweep.spec import load_sweep_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 GENERATOR = ROOT / "docs" / "scripts" / "file_reference.py"
@@ -98,7 +98,9 @@ def _named_keys(module: ModuleType) -> set[str]:
     return keys
 
 
-@pytest.mark.parametrize("module", [spm_opt.problem, spm_opt.model.params, spm_opt.sweep.spec])
+@pytest.mark.parametrize(
+    "module", [spm_opt.problem.problem, spm_opt.model.params, spm_opt.studies.sweep.spec]
+)
 def test_every_key_a_loader_names_is_documented(module: ModuleType, page: str) -> None:
     """Catches keys read only on a path no file takes (then add one to the generator's
     ``other_paths``)."""
@@ -192,3 +194,13 @@ def test_everything_the_api_pages_render_has_a_docstring() -> None:
         if not isinstance(obj, skipped) and not (getattr(obj, "__doc__", None) or "").strip()
     ]
     assert missing == []
+
+
+def test_the_architecture_page_lists_every_module_with_its_job():
+    spec = importlib.util.spec_from_file_location(
+        "architecture", ROOT / "docs" / "scripts" / "architecture.py"
+    )
+    generator = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(generator)
+    page = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    assert page == generator.render(page), "run: python docs/scripts/architecture.py"

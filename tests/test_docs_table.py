@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import spm_opt as so
-from spm_opt.comparison import run_planners
+from spm_opt.studies.comparison import run_planners
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = ("README.md", "docs/guide/compare.md")

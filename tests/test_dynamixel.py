@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spm_opt.errors import CommunicationError, DeviceError, InputError
+from spm_opt.base.errors import CommunicationError, DeviceError, InputError
 from spm_opt.execution import dynamixel
 from spm_opt.execution.backend import hardware_error_names
 from spm_opt.execution.dynamixel import (
@@ -34,7 +34,7 @@ from spm_opt.execution.emulator import (
 )
 from spm_opt.execution.plant import PlantSettings
 from spm_opt.model.actuator import ACTUATORS
-from spm_opt.problem import load_problem
+from spm_opt.problem.problem import load_problem
 
 pytestmark = pytest.mark.real_time
 

@@ -11,8 +11,8 @@ from dynamixel_sdk import GroupSyncRead, GroupSyncWrite, PacketHandler, PortHand
 from hypothesis import given
 from hypothesis import strategies as st
 
+from spm_opt.base.errors import InputError
 from spm_opt.cli import main as cli_main
-from spm_opt.errors import InputError
 from spm_opt.execution.emulator import (
     CorruptReplies,
     DelayReplies,

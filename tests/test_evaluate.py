@@ -312,7 +312,9 @@ def test_landmark_visits_are_searched_in_order_when_the_plan_does_not_say(
 def test_a_trajectory_is_measured_once_per_problem_rate_and_landmark_times(
     paper_problem, monkeypatch
 ):
-    evaluator = importlib.import_module("spm_opt.evaluate")  # the package exports the function
+    evaluator = importlib.import_module(
+        "spm_opt.judge.evaluate"
+    )  # the package exports the function
     trajectory = so.plan(paper_problem, "cubic")
     first = so.evaluate(paper_problem, trajectory)
     measured = []

@@ -19,13 +19,13 @@ from scipy.spatial import cKDTree
 from test_evaluate import meridian_problem
 
 import spm_opt as so
-from spm_opt.errors import InputError
-from spm_opt.evaluate_execution import ExecutionReport, evaluate_log, is_execution_log
+from spm_opt.base.errors import InputError
 from spm_opt.execution.log import LogWriter
 from spm_opt.execution.plant import StateTrace
-from spm_opt.log_estimates import smoothed_derivatives
 from spm_opt.model import dynamics
 from spm_opt.model.params import DEG, MM
+from spm_opt.verify.executed_cut import ExecutionReport, evaluate_log, is_execution_log
+from spm_opt.verify.log_estimates import smoothed_derivatives
 
 ROOT = Path(__file__).resolve().parents[1]
 PERIOD = 0.01  # s: the logs' 100 Hz

@@ -10,7 +10,7 @@ from conftest import HARDWARE_PROBLEM
 from test_bad_inputs import run_cli
 
 import spm_opt as so
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 
 PAPER = Path(__file__).parents[1] / "problems" / "craniotomy_bone_flap.toml"
 

@@ -8,8 +8,8 @@ import pytest
 from scipy.interpolate import BPoly, PPoly
 
 import spm_opt as so
-from spm_opt import contour as contour_module
-from spm_opt.contour import direction_rates, row_lengths
+from spm_opt.cut import contour as contour_module
+from spm_opt.cut.contour import direction_rates, row_lengths
 from spm_opt.model import kinematics
 
 

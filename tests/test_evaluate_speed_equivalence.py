@@ -12,13 +12,13 @@ from scipy.interpolate import BPoly, PPoly
 from scipy.optimize import brentq
 
 import spm_opt as so
-from spm_opt.bounds import (
+from spm_opt.cut.contour import Contour, direction_rates
+from spm_opt.judge.bounds import (
     SAMPLES_PER_SEGMENT,
     duration_lower_bound,
     sampled_segment_lower_bounds,
     segment_lower_bounds,
 )
-from spm_opt.contour import Contour, direction_rates
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 

@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 from conftest import PAPER_PROBLEM
 
-from spm_opt.comparison import run_planners
-from spm_opt.errors import InputError
-from spm_opt.evaluate import evaluate
-from spm_opt.limits import CUT, ROBOT, RULES
+from spm_opt.base.errors import InputError
+from spm_opt.judge.evaluate import evaluate
+from spm_opt.judge.limits import CUT, ROBOT, RULES
 from spm_opt.model.base_parameters import base_parameters
 from spm_opt.model.regressor import regressor
 from spm_opt.planners import contour_planners, plan
@@ -20,8 +19,9 @@ from spm_opt.planners.excitation import (
     fourier_motion,
     rest_constraints,
 )
-from spm_opt.problem import load_problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import load_problem
+from spm_opt.problem.trajectory import Trajectory
+from spm_opt.studies.comparison import run_planners
 
 SMALL = {"duration_s": 20.0, "periods": 2, "harmonics": 3, "points_per_period": 120}
 

@@ -22,7 +22,7 @@ executor's).
    grid, k! times the divided difference is such a mean too), so it keeps the same bound
    with no error of the method. What remains is the log's rounding of goals to 9
    significant digits, ε ≤ 5e-10 |q|, amplified by at most 2^k ε / h^k (h the smallest
-   spacing), and the evaluator's 0.5 % (:mod:`spm_opt.limits`) allowed as for a plan.
+   spacing), and the evaluator's 0.5 % (:mod:`spm_opt.judge.limits`) allowed as for a plan.
 3. The stop is bounded. Let v be a joint's goal speed when the stop starts and a₀ its
    acceleration (at most the plan's peaks V and A over its whole duration, so the bound
    holds whenever the fault comes), a and j the stop's limits. The time-optimal jerk-limited
@@ -58,7 +58,7 @@ import pytest
 from conftest import HARDWARE_PROBLEM
 
 import spm_opt as so
-from spm_opt.errors import CommunicationError
+from spm_opt.base.errors import CommunicationError
 from spm_opt.execution import (
     ExecutionSettings,
     Measurement,
@@ -78,7 +78,7 @@ from spm_opt.execution.emulator import (
 )
 from spm_opt.execution.plant import StateTrace
 from spm_opt.execution.tracking import Lead
-from spm_opt.limits import RULES
+from spm_opt.judge.limits import RULES
 
 pytestmark = pytest.mark.real_time
 

@@ -45,11 +45,11 @@ from test_execution_faults import (
 from test_interactive import Terminal
 
 import spm_opt as so
-from spm_opt.errors import InputError, PreflightError, RunInterrupted
+from spm_opt.base.errors import InputError, PreflightError, RunInterrupted
 from spm_opt.execution import Executor, SimulatedRobot, execute, preflight, read_log
 from spm_opt.execution.dynamixel import DynamixelRobot
 from spm_opt.execution.emulator import DelayReplies, Faults, Overload
-from spm_opt.provenance import check_plan_made_for
+from spm_opt.problem.provenance import check_plan_made_for
 
 pytestmark = pytest.mark.real_time
 

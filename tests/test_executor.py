@@ -16,7 +16,7 @@ from conftest import HARDWARE_PROBLEM
 from test_execution_faults import assert_the_commanded_stop_kept_its_limits, stop_bound
 
 import spm_opt as so
-from spm_opt.errors import PreflightError
+from spm_opt.base.errors import PreflightError
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, execute, read_log
 from spm_opt.execution.log import COLUMNS
 from spm_opt.execution.results import LoopStatistics

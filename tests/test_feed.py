@@ -25,21 +25,17 @@ from scipy.spatial import cKDTree
 from test_execution_faults import LOG_DIGITS_ERROR, derivative_estimates
 
 import spm_opt as so
+from spm_opt.base.errors import InputError
 from spm_opt.cli import main
-from spm_opt.errors import InputError
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
+from spm_opt.execution.ceiling import feed_ceiling
 from spm_opt.execution.dynamixel import DynamixelRobot
 from spm_opt.execution.emulator import spawn_emulator
-from spm_opt.execution.feed import (
-    FEED_STEP,
-    MAX_FEED_JERK_PER_S2,
-    FeedProfile,
-    FeedRequests,
-    feed_ceiling,
-)
+from spm_opt.execution.feed import FEED_STEP, MAX_FEED_JERK_PER_S2, FeedProfile, FeedRequests
 from spm_opt.execution.plant import StateTrace
-from spm_opt.limits import RULES, path_tolerance
-from spm_opt.model import kinematics
+from spm_opt.judge.limits import RULES, path_tolerance
+from spm_opt.judge.paced import PacedLimits
+from spm_opt.model import dynamics, kinematics
 
 SETTINGS = ExecutionSettings()
 PLAN_PATH_RATE_HZ = 10_000.0
@@ -351,6 +347,34 @@ def test_the_feed_ceiling_is_the_fastest_pace_the_evaluator_accepts(
     faster = so.evaluate(hardware_problem, hardware_plan.time_scaled(ceiling + 0.02))
     assert faster.violations
     assert feed_ceiling(hardware_problem, hardware_plan, 1.0) == 1.0
+
+
+@pytest.mark.parametrize(
+    "planner, broken_faster",
+    [
+        ("cubic", {"acceleration step"}),
+        ("toppra", {"joint speed", "joint acceleration", "joint jerk", "hold acceleration"}),
+    ],
+)
+def test_the_paced_limits_are_what_the_evaluator_finds_of_the_plan_run_faster(
+    hardware_problem, planner, broken_faster
+):
+    plan = so.plan(hardware_problem, planner)
+    paced = PacedLimits(hardware_problem, plan)
+    found = set()
+    for feed in (0.5, 1.0, 1.03, 1.07, 1.1, 1.3, 2.0, 3.0):
+        judged = so.evaluate(hardware_problem, plan.time_scaled(feed)).violations
+        assert paced.broken(feed) == {v.rule for v in judged}, feed
+        found |= paced.broken(feed)
+    assert broken_faster <= found
+
+
+def test_the_paced_torques_are_the_models_at_the_faster_motion(hardware_problem, hardware_plan):
+    paced = PacedLimits(hardware_problem, hardware_plan)
+    for feed in (0.5, 1.0, 2.5):
+        _, q, qd, qdd, _ = paced.states(feed)
+        expected = dynamics.actuator_torque(hardware_problem.robot, q, qd, qdd)
+        np.testing.assert_allclose(paced.torque(feed), expected, rtol=1e-9, atol=1e-12)
 
 
 def test_operator_requests_are_checked_and_clipped():

@@ -1,4 +1,4 @@
-"""The figure rules (:mod:`spm_opt.figure_rules`): the checker on hand-made figures that
+"""The figure rules (:mod:`spm_opt.report.figure_rules`): the checker on hand-made figures that
 break each rule, and every figure-writing path exercised.
 
 tests/conftest.py checks every figure a test saves. The figures of ``compare``,
@@ -25,32 +25,33 @@ from matplotlib.figure import Figure
 from test_identify import synthetic_samples, with_efficiency
 
 import spm_opt as so
-from spm_opt.comparison import run_planner
-from spm_opt.figure_rules import ANTERIOR, TOP_VIEW, figure_faults, has_unit, mark_top_view
-from spm_opt.identify import prediction_figure
-from spm_opt.limits import contour_tube
+from spm_opt.identify.report import prediction_figure
+from spm_opt.judge.limits import contour_tube
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
-from spm_opt.plots import REST_STEP, friction_figure, moving_grid, to_png
 from spm_opt.report import comparison_figures
-from spm_opt.sweep import results_figures
-from spm_opt.verify.hardware import CutComparison, RunSamples, cut_figure
+from spm_opt.report.figure_rules import ANTERIOR, TOP_VIEW, figure_faults, has_unit, mark_top_view
+from spm_opt.report.plots import REST_STEP, friction_figure, moving_grid, to_png
+from spm_opt.studies.comparison import run_planner
+from spm_opt.studies.hardware_comparisons import CutComparison, RunSamples
+from spm_opt.studies.hardware_figures import cut_figure
+from spm_opt.studies.sweep import results_figures
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURE_WRITERS = {
-    "spm_opt/comparison.py": (
+    "spm_opt/studies/comparison.py": (
         "test_comparison.py",
         "test_command_writes_the_table_the_summary_and_the_figures",
     ),
-    "spm_opt/reproduce.py": (
+    "spm_opt/studies/reproduce.py": (
         "test_reproduce.py",
         "test_reproduce_command_writes_tables_figures_and_report",
     ),
-    "spm_opt/sweep/results.py": (
+    "spm_opt/studies/sweep/results.py": (
         "test_sweep_results.py",
         "test_drawn_flap_parameters_are_tabulated_and_drawn",
     ),
-    "spm_opt/verify/hardware.py": (
+    "spm_opt/studies/hardware.py": (
         "test_verify_hardware.py",
         "test_every_file_is_written_and_each_figure_is_a_real_png",
     ),
@@ -58,7 +59,7 @@ FIGURE_WRITERS = {
         "test_review.py",
         "test_the_png_is_a_picture_of_sensible_size",
     ),
-    "spm_opt/cli.py": (
+    "spm_opt/cli/commands.py": (
         "test_figures.py",
         "test_the_identification_figure_is_over_time_with_a_title",
     ),
@@ -218,14 +219,14 @@ def test_a_saved_figure_that_breaks_a_rule_fails_the_test(tmp_path: Path) -> Non
 
 def test_every_figure_writer_has_a_test_that_saves_its_figures() -> None:
     """A file that calls to_png or savefig is listed in FIGURE_WRITERS with a test that
-    exists (spm_opt/plots.py defines to_png)."""
+    exists (spm_opt/report/plots.py defines to_png)."""
     sources = [*ROOT.glob("spm_opt/**/*.py"), *ROOT.glob("experiments/*.py")]
     writers = {
         path.relative_to(ROOT).as_posix()
         for path in sources
         if re.search(r"\bto_png\(|\.savefig\(", path.read_text(encoding="utf-8"))
     }
-    assert writers - {"spm_opt/plots.py"} == set(FIGURE_WRITERS)
+    assert writers - {"spm_opt/report/plots.py"} == set(FIGURE_WRITERS)
     for module, name in FIGURE_WRITERS.values():
         assert f"def {name}(" in (ROOT / "tests" / module).read_text(encoding="utf-8"), name
 

@@ -9,7 +9,7 @@ from conftest import ROOT
 
 import spm_opt as so
 from spm_opt.model.params import MM
-from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION, Flap, random_flaps
+from spm_opt.studies.sweep.flaps import DURATION_SPEED_FRACTION, Flap, random_flaps
 
 SIZES_MM = (20.0, 90.0)
 SPEED_MM_S = 3.0

@@ -19,12 +19,12 @@ from test_execution_faults import derivative_estimates
 from test_feed import ScriptedRobot, cut_distance, holds, plan_cut_tree
 
 import spm_opt as so
+from spm_opt.base.ruckig_local import calculate_locally
 from spm_opt.execution import ExecutionSettings, Executor, read_log
 from spm_opt.execution.feed import FeedProfile, NoRoom
-from spm_opt.hold_room import hold_stop
-from spm_opt.limits import RULES, path_tolerance
-from spm_opt.problem import DEFAULT_HOLD_WITHIN_S
-from spm_opt.ruckig_local import calculate_locally
+from spm_opt.judge.hold_room import hold_stop
+from spm_opt.judge.limits import RULES, path_tolerance
+from spm_opt.problem.problem import DEFAULT_HOLD_WITHIN_S
 
 PLANT = so.load_robot(ROOT / "problems" / "robots" / "prototype_plant.toml")
 SETTINGS = ExecutionSettings()

@@ -14,17 +14,18 @@ from conftest import HARDWARE_PROBLEM
 from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
 from spm_opt.execution.log import COLUMNS
-from spm_opt.identify import identify, prediction_rms, true_base_parameters
-from spm_opt.identify_loop import estimate_loops
-from spm_opt.identify_samples import Samples, log_samples
+from spm_opt.identify.estimate import identify
+from spm_opt.identify.loop import estimate_loops
+from spm_opt.identify.samples import Samples, log_samples
+from spm_opt.identify.validate import prediction_rms, true_base_parameters
 from spm_opt.model import dynamics
 from spm_opt.model.base_parameters import base_parameters
 from spm_opt.model.params import Robot, load_robot, robot_toml
 from spm_opt.model.regressor import standard_parameters
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.trajectory import Trajectory
 
 ROBOTS = Path(__file__).resolve().parents[1] / "problems" / "robots"
 RATE_HZ = 500.0

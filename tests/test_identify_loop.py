@@ -15,12 +15,12 @@ import scipy.interpolate
 from conftest import HARDWARE_PROBLEM
 
 import spm_opt as so
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
 from spm_opt.execution.log import COLUMNS
-from spm_opt.identify_loop import estimate_loops, goal_rms
+from spm_opt.identify.loop import estimate_loops, goal_rms
 from spm_opt.model.params import load_robot
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.trajectory import Trajectory
 
 ROBOTS = Path(__file__).resolve().parents[1] / "problems" / "robots"
 GAIN_PER_S = np.array([25.0, 40.0])

@@ -14,8 +14,9 @@ import spm_opt as so
 from spm_opt.execution import ExecutionSettings, execute
 from spm_opt.execution.dynamixel import DynamixelRobot
 from spm_opt.execution.emulator import spawn_emulator
-from spm_opt.identify import IDENTIFIED_RELATIVE_ERROR, identify, prediction_rms
-from spm_opt.identify_samples import log_samples
+from spm_opt.identify.estimate import IDENTIFIED_RELATIVE_ERROR, identify
+from spm_opt.identify.samples import log_samples
+from spm_opt.identify.validate import prediction_rms
 from spm_opt.model.base_parameters import base_parameters
 from spm_opt.model.params import load_robot
 from spm_opt.model.regressor import standard_parameters

@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from spm_opt.interrupt import solve
+from spm_opt.base.interrupt import solve
 
 pytestmark = pytest.mark.real_time
 
@@ -150,12 +150,12 @@ def test_the_package_and_the_command_import_nothing_heavy_until_used():
     """So that a Ctrl-C in ``main`` finds its handler (and ``--version`` starts at once):
     the modules a command needs are imported inside it."""
     code = (
-        "import sys, spm_opt, spm_opt.cli\n"
+        "import sys, spm_opt, spm_opt.cli, spm_opt.base.version\n"
         "heavy = [m for m in ('numpy', 'casadi', 'scipy', 'pandas', 'matplotlib') "
         "if m in sys.modules]\n"
         "print(heavy)\n"
         "missing = [n for n in spm_opt.__all__ if getattr(spm_opt, n, None) is None]\n"
-        "print(missing, spm_opt.__version__ == spm_opt.cli.package_version())"
+        "print(missing, spm_opt.__version__ == spm_opt.base.version.package_version())"
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert run.stdout.splitlines() == ["[]", "[] True"]
@@ -163,8 +163,9 @@ def test_the_package_and_the_command_import_nothing_heavy_until_used():
 
 def test_a_public_name_stays_what_it_names_when_its_module_is_imported_first():
     code = (
-        "import sys, spm_opt.evaluate, spm_opt as so\n"
-        "print(callable(so.evaluate), so.evaluate is sys.modules['spm_opt.evaluate'].evaluate)"
+        "import sys, spm_opt.verify.judgement, spm_opt as so\n"
+        "home = sys.modules['spm_opt.verify.judgement']\n"
+        "print(callable(so.evaluate), so.evaluate is home.evaluate)"
     )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert run.stdout.split() == ["True", "True"]

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from spm_opt.errors import UnreachableError
+from spm_opt.base.errors import UnreachableError
 from spm_opt.model import kinematics as kin
 from spm_opt.model.params import load_robot
 

@@ -1,4 +1,4 @@
-"""What a limit means is written once (spm_opt.limits) and every planner keeps it as the
+"""What a limit means is written once (spm_opt.judge.limits) and every planner keeps it as the
 evaluator judges it."""
 
 import dataclasses
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import spm_opt as so
-from spm_opt.limits import RULES, planner_bounds, torque_limit
+from spm_opt.judge.limits import RULES, planner_bounds, torque_limit
 from spm_opt.model import dynamics
 from spm_opt.model.actuator import CurrentTorqueMap
 

@@ -33,7 +33,7 @@ from test_execution_faults import (
 )
 
 import spm_opt as so
-from spm_opt.errors import PreflightError
+from spm_opt.base.errors import PreflightError
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
 from spm_opt.execution.log import COLUMNS, LogWriter
 

@@ -13,16 +13,16 @@ from scipy.signal import savgol_coeffs
 from test_evaluate_execution import PERIOD, VELOCITY_QUANTUM, meridian_sweep, write_log
 
 import spm_opt as so
-from spm_opt.evaluate_execution import evaluate_log
-from spm_opt.log_estimates import (
+from spm_opt.model import kinematics
+from spm_opt.model.params import DEG, MM
+from spm_opt.verify.executed_cut import evaluate_log
+from spm_opt.verify.log_estimates import (
     ACCELERATION_SPAN_S,
     JERK_SPAN_S,
     filter_width,
     log_resolution,
     smoothed_derivatives,
 )
-from spm_opt.model import kinematics
-from spm_opt.model.params import DEG, MM
 
 PULSE = 2 * np.pi / 361_384  # rad: one L54 encoder pulse
 

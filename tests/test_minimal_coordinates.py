@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from scipy.integrate import fixed_quad
 
 import spm_opt as so
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.model import kinematics as kin
 from spm_opt.model.params import Payload, Robot, load_robot
 from spm_opt.verify.minimal_coordinates import minimal_energy, minimal_inverse_dynamics

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.model.params import load_robot
 from spm_opt.verify import motion_capture as mc
 
@@ -58,13 +58,13 @@ def test_registration_recovers_a_transform_exactly_without_noise() -> None:
     camera = (LANDMARKS - translation) @ rotation
     reg = mc.rigid_registration(camera, LANDMARKS)
     np.testing.assert_allclose(reg.rotation, rotation, atol=1e-12)
-    np.testing.assert_allclose(reg.translation, translation, atol=1e-12)
-    assert reg.rms_error_m < 1e-12
-    assert reg.residuals_m.shape == (8,)
-    np.testing.assert_allclose(reg.apply(camera), LANDMARKS, atol=1e-12)
-    np.testing.assert_allclose(reg.apply(camera[0]), LANDMARKS[0], atol=1e-12)
-    homogeneous = np.column_stack([camera, np.ones(8)]) @ reg.matrix.T
-    np.testing.assert_allclose(homogeneous[:, :3], LANDMARKS, atol=1e-12)
+    np.testing.assert_allclose(reg.translation_mm * MM, translation, atol=1e-12)
+    assert reg.rms_mm * MM < 1e-12
+    assert reg.residuals_mm.shape == (8,)
+    np.testing.assert_allclose(mc.to_manipulator_frame(reg, camera), LANDMARKS, atol=1e-12)
+    np.testing.assert_allclose(mc.to_manipulator_frame(reg, camera[0]), LANDMARKS[0], atol=1e-12)
+    homogeneous = np.column_stack([camera / MM, np.ones(8)]) @ reg.matrix_mm.T
+    np.testing.assert_allclose(homogeneous[:, :3] * MM, LANDMARKS, atol=1e-12)
 
 
 @pytest.mark.parametrize(("sigma_camera", "sigma_model"), [(0.5 * MM, 0.0), (0.4 * MM, 0.3 * MM)])
@@ -87,8 +87,8 @@ def test_registration_rms_error_matches_the_noise(sigma_camera: float, sigma_mod
         camera = (LANDMARKS - translation) @ rotation + sigma_camera * rng.standard_normal((n, 3))
         model = LANDMARKS + sigma_model * rng.standard_normal((n, 3))
         reg = mc.rigid_registration(camera, model)
-        np.testing.assert_allclose(reg.rms_error_m, np.sqrt(np.mean(reg.residuals_m**2)))
-        squares.append(reg.rms_error_m**2)
+        np.testing.assert_allclose(reg.rms_mm, np.sqrt(np.mean(reg.residuals_mm**2)))
+        squares.append((reg.rms_mm * MM) ** 2)
     measured = np.sqrt(np.mean(squares))
     assert expected == pytest.approx(0.75 * MM)
     assert measured == pytest.approx(expected, rel=0.03)
@@ -118,8 +118,8 @@ def test_any_rigid_transform_is_recovered_exactly(
     camera = (model - translation) @ rotation
     reg = mc.rigid_registration(camera, model)
     np.testing.assert_allclose(reg.rotation, rotation, atol=1e-12)
-    np.testing.assert_allclose(reg.translation, translation, atol=1e-12)
-    assert reg.rms_error_m < 1e-12
+    np.testing.assert_allclose(reg.translation_mm * MM, translation, atol=1e-12)
+    assert reg.rms_mm * MM < 1e-12
 
 
 @settings(max_examples=60, deadline=None)
@@ -133,12 +133,12 @@ def test_the_rotation_is_proper_even_when_a_reflection_fits_exactly(
     reg = mc.rigid_registration(camera, model)
     np.testing.assert_allclose(reg.rotation @ reg.rotation.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(reg.rotation) == pytest.approx(1.0, abs=1e-12)
-    assert reg.rms_error_m > 0.0  # no proper rotation maps a non-coplanar set onto its mirror
+    assert reg.rms_mm > 0.0  # no proper rotation maps a non-coplanar set onto its mirror
     # ... and it is the best proper rotation: scipy's align_vectors finds no better one
     centred_c, centred_m = camera - camera.mean(axis=0), model - model.mean(axis=0)
     other, _ = Rotation.align_vectors(centred_m, centred_c)
     other_rms = np.sqrt(np.mean(np.sum((other.apply(centred_c) - centred_m) ** 2, axis=1)))
-    assert reg.rms_error_m <= other_rms + 1e-12
+    assert reg.rms_mm * MM <= other_rms + 1e-12
 
 
 _GOOD = LANDMARKS[:4]
@@ -171,7 +171,7 @@ def test_bad_registration_input_names_the_argument(
 def test_apply_checks_its_input() -> None:
     reg = mc.rigid_registration(LANDMARKS, LANDMARKS)
     with pytest.raises(InputError, match="points_c"):
-        reg.apply(np.zeros((5, 2)))
+        mc.to_manipulator_frame(reg, np.zeros((5, 2)))
 
 
 # --- path deviation ----------------------------------------------------------------------
@@ -285,8 +285,8 @@ def test_noiseless_capture_registers_exactly() -> None:
     capture = mc.synthetic_capture(LANDMARKS, times, path, rng=11, noise_std_m=0.0)
     reg = mc.rigid_registration(capture.landmarks_c, LANDMARKS)
     np.testing.assert_allclose(reg.rotation, capture.true_rotation, atol=1e-12)
-    np.testing.assert_allclose(reg.translation, capture.true_translation, atol=1e-12)
-    np.testing.assert_allclose(reg.apply(capture.marker_c), path, atol=1e-12)
+    np.testing.assert_allclose(reg.translation_mm * MM, capture.true_translation, atol=1e-12)
+    np.testing.assert_allclose(mc.to_manipulator_frame(reg, capture.marker_c), path, atol=1e-12)
 
 
 def test_round_trip_error_matches_noise_and_target_registration_error() -> None:
@@ -312,7 +312,7 @@ def test_round_trip_error_matches_noise_and_target_registration_error() -> None:
     for seed in range(200):
         capture = mc.synthetic_capture(LANDMARKS, times, path, rng=seed, noise_std_m=sigma)
         reg = mc.rigid_registration(capture.landmarks_c, LANDMARKS)
-        error = reg.apply(capture.marker_c) - path
+        error = mc.to_manipulator_frame(reg, capture.marker_c) - path
         squares.append(np.mean(np.sum(error**2, axis=1)))
     assert np.sqrt(np.mean(squares)) == pytest.approx(expected, rel=0.05)
     assert expected / sigma == pytest.approx(1.96, abs=0.05)
@@ -440,7 +440,7 @@ def test_files_to_deviation(tmp_path: Path) -> None:
     track = mc.read_capture_csv(capture_file)
     assert track.n_occluded == 40
     reg = mc.rigid_registration(landmarks_c, LANDMARKS)
-    assert reg.rms_error_m < 3 * capture.noise_std_m
-    deviation = mc.path_deviation(reg.apply(track.points_m), path)
+    assert reg.rms_mm * MM < 3 * capture.noise_std_m
+    deviation = mc.path_deviation(mc.to_manipulator_frame(reg, track.points_m), path)
     assert deviation.rms_distance_mm < 3 * capture.noise_std_m / MM
     assert deviation.centroid_distance_mm < 3 * capture.noise_std_m / MM

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_bad_inputs import run_cli
 
-from spm_opt.errors import PlanningError
+from spm_opt.base.errors import PlanningError
 from spm_opt.model import library_cache
 from spm_opt.planners import PLANNERS
 from spm_opt.planners.ocp import nlp_library

@@ -19,7 +19,7 @@ from spm_opt.model import dynamics
 from spm_opt.model.joint_torque import dynamics_parameters, load_torque
 from spm_opt.model.params import MM
 from spm_opt.planners import contour_planners, get_planner
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.studies.sweep.spec import load_sweep_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

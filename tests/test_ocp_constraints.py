@@ -6,9 +6,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from spm_opt.errors import PlanningError
-from spm_opt.evaluate import Violation
-from spm_opt.limits import RELATIVE_TOLERANCE, RULES, PlannerBounds
+from spm_opt.base.errors import PlanningError
+from spm_opt.judge.limits import RELATIVE_TOLERANCE, RULES, PlannerBounds
+from spm_opt.judge.report import Violation
 from spm_opt.planners.ocp.constraints import (
     ACCELERATION,
     JERK,
@@ -48,7 +48,7 @@ def violation(rule: str, worst: float = 1.1, allowed: float = 1.0) -> Violation:
 
 
 def test_every_rule_a_limit_keeps_is_the_evaluators():
-    """The evaluator names its findings by :data:`spm_opt.limits.RULES` alone."""
+    """The evaluator names its findings by :data:`spm_opt.judge.limits.RULES` alone."""
     assert set(KEPT) <= set(RULES)
 
 

@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from plan_checks import assert_within_limits, cut_points, on_contour, sample
 
 import spm_opt as so
-from spm_opt.bounds import segment_lower_bounds
-from spm_opt.limits import planner_bounds
+from spm_opt.judge.bounds import segment_lower_bounds
+from spm_opt.judge.limits import planner_bounds
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp import path_planner

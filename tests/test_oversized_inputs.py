@@ -4,7 +4,7 @@ Each oversized input goes to the real command line in a process of its own whose
 space is capped (:data:`MEMORY_CAP_BYTES`); it must end in status 2 with one short
 ``spm-opt: error:`` line, within :data:`TIMEOUT_S` (a guard against hangs, not a bound on
 speed). The inputs are made here, in the test's temporary directory. Before the limits of
-:mod:`spm_opt.input_limits`, the dotted key took 23.7 GB, the nested arrays a traceback of
+:mod:`spm_opt.base.input_limits`, the dotted key took 23.7 GB, the nested arrays a traceback of
 3,001 lines, the landmarks 466 TiB, the durations 51 s and a 100 MB line, the sweep
 minutes, and the log a ``MemoryError`` traceback at 7.8 GB.
 """
@@ -23,11 +23,11 @@ import pytest
 from test_bad_inputs import DURATIONS, assert_one_error, write_problem
 
 import spm_opt as so
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
+from spm_opt.base.fields import parse_toml
+from spm_opt.base.input_limits import MAX_LANDMARKS, MAX_LOG_ROWS, MAX_TRAJECTORY_ROWS
 from spm_opt.execution.log import COLUMNS
-from spm_opt.fields import parse_toml
-from spm_opt.input_limits import MAX_LANDMARKS, MAX_LOG_ROWS, MAX_TRAJECTORY_ROWS
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.studies.sweep.spec import load_sweep_spec
 
 MEMORY_CAP_BYTES = 3 << 30
 """Address space of each command (3 GiB; importing numpy, scipy and CasADi and planning

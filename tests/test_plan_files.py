@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from spm_opt.errors import InputError
-from spm_opt.files import TEMPORARY_SUFFIX, write_atomically
-from spm_opt.trajectory import Trajectory, sidecar_path
+from spm_opt.base.errors import InputError
+from spm_opt.base.files import TEMPORARY_SUFFIX, write_atomically
+from spm_opt.problem.trajectory import Trajectory, sidecar_path
 
 TESTS = Path(__file__).resolve().parent
 

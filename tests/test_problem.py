@@ -9,7 +9,7 @@ import pytest
 
 import spm_opt as so
 from spm_opt.model.params import MM
-from spm_opt.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM
+from spm_opt.problem.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM
 
 PROBLEMS = sorted((Path(__file__).resolve().parents[1] / "problems").glob("*.toml"))
 

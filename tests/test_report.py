@@ -1,6 +1,6 @@
 """The reporting layer (spm_opt/report/): it never imports the modules that call it, it
 holds each column's heading once, every markdown table is built by its one helper, and
-the comparison states the evaluator's tolerance as spm_opt.limits gives it."""
+the comparison states the evaluator's tolerance as spm_opt.judge.limits gives it."""
 
 from __future__ import annotations
 
@@ -12,11 +12,13 @@ from types import SimpleNamespace
 import pytest
 
 import spm_opt
-from spm_opt import comparison, limits, reproduce
-from spm_opt.comparison import Outcome, comparison_markdown
+from spm_opt.judge import limits
+from spm_opt.studies import comparison, reproduce
+from spm_opt.studies.comparison import Outcome, comparison_markdown
 
 PACKAGE = Path(spm_opt.__file__).resolve().parent
-CALLERS = ("spm_opt.comparison", "spm_opt.sweep", "spm_opt.reproduce", "spm_opt.verify")
+CALLERS = ("spm_opt.studies", "spm_opt.identify", "spm_opt.cli")
+"""The layers above the report, which call it (the hardware verification is a study now)."""
 
 
 def imported(path: Path) -> set[str]:
@@ -36,7 +38,7 @@ def imported(path: Path) -> set[str]:
 
 def test_the_report_layer_never_imports_its_callers() -> None:
     modules = sorted((PACKAGE / "report").glob("*.py"))
-    assert {"markdown.py", "columns.py", "comparison_figures.py"} <= {p.name for p in modules}
+    assert {"columns.py", "comparison_figures.py"} <= {p.name for p in modules}
     for path in modules:
         callers = {name for name in imported(path) if name.startswith(CALLERS)}
         assert not callers, f"{path.name} imports {sorted(callers)}"
@@ -46,7 +48,9 @@ def test_no_figure_module_imports_the_comparison() -> None:
     figures = sorted(PACKAGE.rglob("*figures*.py"))
     assert PACKAGE / "report" / "comparison_figures.py" in figures
     for path in figures:
-        assert not any(name.startswith("spm_opt.comparison") for name in imported(path)), path
+        assert not any(name.startswith("spm_opt.studies.comparison") for name in imported(path)), (
+            path
+        )
 
 
 def test_each_column_has_its_words_once() -> None:
@@ -80,9 +84,11 @@ def test_the_comparison_states_the_evaluators_tolerance(
     paper_problem, failed_only: list[Outcome], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     assert limits.tolerance_note() in comparison_markdown(paper_problem, failed_only)
-    monkeypatch.setattr(limits, "tolerance_note", lambda: "Tolerance: as spm_opt.limits says.")
+    monkeypatch.setattr(
+        limits, "tolerance_note", lambda: "Tolerance: as spm_opt.judge.limits says."
+    )
     text = comparison_markdown(paper_problem, failed_only)
-    assert "Tolerance: as spm_opt.limits says." in text
+    assert "Tolerance: as spm_opt.judge.limits says." in text
     assert "0.5 %" not in text and "0.01 mm" not in text
 
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from test_cli_startup import command_summaries
 
-from spm_opt import paper
 from spm_opt.cli import main
 from spm_opt.model.params import MM
-from spm_opt.reproduce import (
+from spm_opt.studies import paper
+from spm_opt.studies.reproduce import (
     AGREES,
     DISAGREES,
     TRUNCATED,

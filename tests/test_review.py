@@ -1,4 +1,4 @@
-"""The 3-D review page (spm_opt.report.review), its PNG (review_png), the robot drawn at
+"""The 3-D review page (spm_opt.report.review_page), its PNG (review_png), the robot drawn at
 joint angles (robot_geometry) and the ``spm-opt review`` command."""
 
 from __future__ import annotations
@@ -18,13 +18,13 @@ from conftest import HARDWARE_PROBLEM, PAPER_PROBLEM
 from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
-from spm_opt.evaluate import evaluate
-from spm_opt.evaluate_execution import MEASURED, read_log_checked
 from spm_opt.execution.log import COLUMNS, header_path
+from spm_opt.judge.evaluate import evaluate
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.provenance import check_run_of
-from spm_opt.report.review import ASIDE_WIDTH, ReviewInputs, review_inputs, review_page
+from spm_opt.problem.provenance import check_run_of
+from spm_opt.report.review_inputs import ReviewInputs, review_inputs
+from spm_opt.report.review_page import ASIDE_WIDTH, review_page
 from spm_opt.report.review_png import review_png
 from spm_opt.report.review_scene import (
     MAX_SKULL_FACES,
@@ -35,6 +35,7 @@ from spm_opt.report.review_scene import (
 )
 from spm_opt.report.robot_geometry import TOOL_OVERHANG, robot_pose
 from spm_opt.skull.surface import Skull
+from spm_opt.verify.executed_cut import MEASURED, read_log_checked
 
 SKULL_RADIUS = 0.07
 """The test skull: a sphere of 70 mm about the isocenter, m."""

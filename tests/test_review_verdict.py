@@ -17,11 +17,13 @@ from conftest import HARDWARE_PROBLEM, PAPER_PROBLEM, ROOT
 from test_bad_inputs import run_cli
 
 import spm_opt as so
-from spm_opt.evaluate import Violation, evaluate
-from spm_opt.limits import contour_tube
+from spm_opt.judge.evaluate import evaluate
+from spm_opt.judge.limits import contour_tube
+from spm_opt.judge.report import Violation
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.report.review import review_figure, review_inputs
+from spm_opt.report.review_figure import review_figure
+from spm_opt.report.review_inputs import review_inputs
 from spm_opt.report.review_png import MAX_LISTED, review_png_figure
 from spm_opt.report.review_scene import review_scene
 from spm_opt.report.review_verdict import judged_cuts, verdict_line

@@ -9,9 +9,9 @@ import pytest
 import ruckig
 
 import spm_opt as so
+from spm_opt.base.ruckig_local import calculate_locally
 from spm_opt.model.params import MM
 from spm_opt.planners import ruckig as ruckig_planner
-from spm_opt.ruckig_local import calculate_locally
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 NAMES = ("craniotomy_bone_flap", "craniotomy_large_flap", "craniotomy_five_landmarks")

@@ -13,7 +13,8 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
+from spm_opt.model.rigid import apply
 from spm_opt.skull.frames import to_ras
 from spm_opt.skull.generate import (
     SEMI_AXES_MM,
@@ -24,7 +25,7 @@ from spm_opt.skull.generate import (
     write_example,
 )
 from spm_opt.skull.markups import read_markups
-from spm_opt.skull.registration import apply, check_transform
+from spm_opt.skull.registration import check_transform
 
 FACET_MM = 0.05
 """How far a mesh subdivided 5 times may lie from its analytic surface along a ray, mm

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.skull import mesh as mesh_module
 from spm_opt.skull.mesh import load_mesh, to_robot
 from spm_opt.skull.raycast import MeshSurface
@@ -85,7 +85,10 @@ def test_the_radius_lies_on_the_ellipsoid_within_the_facets_sagitta(vectors):
     p = unit(np.array(vectors))
     radius = MeshSurface(mesh).radius(p)
     expected = ellipsoid_radius(p, AXES)
-    assert np.all(radius <= expected + 1e-12)  # the facets are chords inside the surface
+    # the facets are chords inside the surface; a ray that Embree (single precision) sends
+    # to the facet beside the one it crosses meets that facet's plane just past their edge:
+    # (0, 1e-9, -0.5) comes out 1.9e-12 m outside at the pole, so allow a nanometre
+    assert np.all(radius <= expected + 1e-9)
     assert np.all(radius >= expected - sagitta(mesh, AXES))
 
 

@@ -23,9 +23,9 @@ from test_bad_inputs import assert_nothing_written, assert_one_error, run_cli
 
 import spm_opt as so
 from spm_opt.model import kinematics
+from spm_opt.model.rigid import apply
 from spm_opt.skull.example_problem import write_example_problem
 from spm_opt.skull.markups import read_markups, write_markups
-from spm_opt.skull.registration import apply
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = str(ROOT / "problems" / "robots" / "prototype.toml")
@@ -235,7 +235,7 @@ def test_a_non_manifold_mesh_is_refused(tmp_path):
 
 
 def test_the_comparison_names_the_skull_and_its_registration(tmp_path):
-    from spm_opt.comparison import comparison_markdown
+    from spm_opt.studies.comparison import comparison_markdown
 
     problem = so.load_problem(example(tmp_path, subdivisions=3, registration=True))
     summary = comparison_markdown(problem, [])

@@ -7,7 +7,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import spm_opt as so
-from spm_opt.contour import Contour
+from spm_opt.cut.contour import Contour
 from spm_opt.skull.arc_fit import fit_arc_radius
 from spm_opt.skull.landmark_surface import LandmarkSurface
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import spm_opt as so
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.studies.sweep.spec import load_sweep_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "problems" / "sweeps" / "random_flaps_small.toml"
@@ -121,13 +121,13 @@ def test_rows_of_other_code_are_stale_and_computed_again(tmp_path, capsys):
     spec, out = tiny_spec(tmp_path), tmp_path / "out"
     changed = tmp_path / "changed" / "spm_opt"
     shutil.copytree(ROOT / "spm_opt", changed, ignore=shutil.ignore_patterns("__pycache__"))
-    with open(changed / "sweep" / "task.py", "a") as source:
+    with open(changed / "studies" / "sweep" / "task.py", "a") as source:
         source.write("\n# a change of the code\n")
     command = [
         sys.executable,
         "-c",
-        "from spm_opt.sweep.runner import run_sweep\n"
-        "from spm_opt.sweep.spec import load_sweep_spec\n"
+        "from spm_opt.studies.sweep.runner import run_sweep\n"
+        "from spm_opt.studies.sweep.spec import load_sweep_spec\n"
         f"run_sweep(load_sweep_spec({str(spec)!r}).tasks(), {str(out)!r}, progress=False)",
     ]
     environment = {**os.environ, "PYTHONPATH": str(changed.parent)}

@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.report.columns import COLUMNS
-from spm_opt.sweep import results_figures
-from spm_opt.sweep.results import (
+from spm_opt.studies.sweep import results_figures
+from spm_opt.studies.sweep.results import (
     load_sweep,
     sweep_figures,
     sweep_markdown,

@@ -33,12 +33,13 @@ from sweep_helpers import (
     thread_settings,
 )
 
-from spm_opt.errors import InputError, PlanningError
-from spm_opt.sweep import runner
-from spm_opt.sweep.results import load_sweep, write_sweep_report
-from spm_opt.sweep.runner import THREAD_VARIABLES, SweepSummary, run_sweep, threads_per_worker
-from spm_opt.sweep.spec import load_sweep_spec
-from spm_opt.sweep.task import failure_kind
+from spm_opt.base.errors import InputError, PlanningError
+from spm_opt.studies.sweep import dask_cluster
+from spm_opt.studies.sweep.pool import THREAD_VARIABLES, threads_per_worker
+from spm_opt.studies.sweep.results import load_sweep, write_sweep_report
+from spm_opt.studies.sweep.runner import SweepSummary, run_sweep
+from spm_opt.studies.sweep.spec import load_sweep_spec
+from spm_opt.studies.sweep.task import failure_kind
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMING = {"worker", "finished_at", "wall_time_s", "solve_time_s"}
@@ -487,7 +488,7 @@ def test_an_unreachable_scheduler_is_an_input_error(
     with socket.socket() as unused:
         unused.bind(("127.0.0.1", 0))
         address = f"tcp://127.0.0.1:{unused.getsockname()[1]}"
-    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 0.5)
+    monkeypatch.setattr(dask_cluster, "CONNECT_TIMEOUT_S", 0.5)
     with pytest.raises(InputError, match=f"^--scheduler {address}: cannot connect") as error:
         run_sweep(grid_tasks(1), tmp_path, scheduler=address, progress=False, task_function=square)
     assert "\n" not in str(error.value)

@@ -12,10 +12,10 @@ import pytest
 from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
-from spm_opt.fields import Table
-from spm_opt.sweep.flaps import DURATION_SPEED_FRACTION
-from spm_opt.sweep.spec import _grid, load_sweep_spec
-from spm_opt.sweep.task import ProblemFiles, _anchor_plan, code_identity, run_task
+from spm_opt.base.fields import Table
+from spm_opt.studies.sweep.flaps import DURATION_SPEED_FRACTION
+from spm_opt.studies.sweep.spec import _grid, load_sweep_spec
+from spm_opt.studies.sweep.task import ProblemFiles, _anchor_plan, code_identity, run_task
 
 ROOT = Path(__file__).resolve().parents[1]
 SWEEPS = ROOT / "problems" / "sweeps"
@@ -400,7 +400,7 @@ def test_equal_grid_values_of_every_kind_are_found():
 def test_a_warm_started_row_does_not_depend_on_what_ran_before(tmp_path):
     """ocp-min-time starts from its anchor's plan (the base problem, planned from scratch
     once per process), so a task gives the same row whichever tasks its worker ran."""
-    from spm_opt.sweep import task as task_module
+    from spm_opt.studies.sweep import task as task_module
 
     text = GOOD.replace('["cubic", "ruckig"]', '["ocp-min-time"]')
     text = text[: text.index("[random]")].replace('"robot.friction.mu" = [0.04, 0.24]\n', "")

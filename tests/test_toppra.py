@@ -10,8 +10,8 @@ import pytest
 import spm_opt as so
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.planners.toppra import time_optimal_guess
-from spm_opt.sweep.flaps import random_flaps
+from spm_opt.planners.toppra.guess import time_optimal_guess
+from spm_opt.studies.sweep.flaps import random_flaps
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 SUITE = ("craniotomy_bone_flap", "craniotomy_large_flap", "craniotomy_five_landmarks")

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import spm_opt as so
-from spm_opt.errors import PreflightError
+from spm_opt.base.errors import PreflightError
 from spm_opt.execution.tracking import Lead, following_error_limit
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import DEG

@@ -7,7 +7,7 @@ import pytest
 from scipy.interpolate import BPoly
 
 import spm_opt as so
-from spm_opt.trajectory import COLUMNS
+from spm_opt.problem.trajectory import COLUMNS
 
 
 def test_csv_round_trip_reproduces_the_samples_exactly(tmp_path, baseline):

@@ -11,12 +11,8 @@ import pytest
 from test_feed import THREE_HOLDS_TWO_OVERRIDES, holds, scripted_run
 
 from spm_opt.model.params import DEG
-from spm_opt.verify.hardware import (
-    RunSamples,
-    compare_tracking,
-    holds_from_events,
-    write_verification,
-)
+from spm_opt.studies.hardware import write_verification
+from spm_opt.studies.hardware_comparisons import RunSamples, compare_tracking, holds_from_events
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 FILES = {

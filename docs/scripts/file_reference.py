@@ -5,7 +5,7 @@ files and of every planner's ``[planner.NAME]`` settings, from the code that rea
 
 The keys come from loading the repository's own files (``problems/*.toml``,
 ``problems/robots/*.toml``, ``problems/sweeps/*.toml``, and two files that take paths no
-shipped file takes: :func:`other_paths`) under :func:`spm_opt.fields.recording`: every
+shipped file takes: :func:`other_paths`) under :func:`spm_opt.base.fields.recording`: every
 key the loaders ask for, present in the file or not, with its reader's default, bounds and
 choices.
 The planner settings come from each registered planner reading them, with the registry's
@@ -28,12 +28,12 @@ from unittest import mock
 
 import tomli_w
 
-from spm_opt.fields import KeyRecord, recording
+from spm_opt.base.fields import KeyRecord, recording
 from spm_opt.model.params import load_robot
 from spm_opt.planners import PLANNERS
-from spm_opt.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM as _TOLERANCE_MM
-from spm_opt.problem import load_problem
-from spm_opt.sweep.spec import load_sweep_spec
+from spm_opt.problem.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM as _TOLERANCE_MM
+from spm_opt.problem.problem import load_problem
+from spm_opt.studies.sweep.spec import load_sweep_spec
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "reference" / "files.md"

@@ -12,10 +12,10 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from spm_opt.figure_rules import mark_top_view
 from spm_opt.model import kinematics
-from spm_opt.plots import skull_wireframe
-from spm_opt.problem import Problem, load_problem
+from spm_opt.problem.problem import Problem, load_problem
+from spm_opt.report.figure_rules import mark_top_view
+from spm_opt.report.plots import skull_wireframe
 
 ROOT = Path(__file__).resolve().parents[2]
 FIGURE = ROOT / "docs" / "img" / "frames.png"

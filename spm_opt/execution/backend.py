@@ -14,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from spm_opt.errors import CommunicationError
+from spm_opt.base.errors import CommunicationError
 
 __all__ = [
     "CLOCK_EPSILON_S",

@@ -27,8 +27,8 @@ from spm_opt.execution.feed import FEED_STEP
 from spm_opt.execution.results import RunStatus
 from spm_opt.model import kinematics
 from spm_opt.model.params import DEG, MM
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 _LOG = logging.getLogger(__name__)
 

@@ -58,14 +58,14 @@ from typing import Any
 
 import numpy as np
 
-from spm_opt.errors import DeviceError, InputError, require
+from spm_opt.base.errors import DeviceError, InputError, require
+from spm_opt.base.input_limits import excerpt
 from spm_opt.execution.backend import (
     CommunicationError,
     Measurement,
     MonotonicClock,
     hardware_error_names,
 )
-from spm_opt.input_limits import excerpt
 from spm_opt.model.actuator import Actuator
 
 logger = logging.getLogger(__name__)

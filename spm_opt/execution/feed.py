@@ -16,26 +16,26 @@ stretch until the profile stays inside it), with r between its start and its tar
 - jerk: |q‴| r³ + 3 |q″| r |ṙ| + |q′| |r̈| ≤ J gives r̈ once ṙ's bound is chosen (ṙ's
   bound is halved while that shortens the change);
 - speed: r never exceeds the larger of its start and its target, so |q′ r| stays within
-  what the plan at that feed needs, which the ceiling (:func:`feed_ceiling`) keeps within
-  the speed limit.
+  what the plan at that feed needs, which the ceiling
+  (:func:`~spm_opt.execution.ceiling.feed_ceiling`) keeps within the speed limit.
 
 The bounds use :data:`HEADROOM` of each limit. Every profile is then checked before it is
 used, at samples half a control period apart: the joints' speed, acceleration and jerk
 (signed, with r̈ on either side of each sample) within the limits as the evaluator allows
-them (:mod:`spm_opt.limits`), or within what the plan itself needs at that feed where that
+them (:mod:`spm_opt.judge.limits`), or within what the plan itself needs at that feed where that
 is more (the ceiling's business), and r ≥ 0.
 
 Where that finds no room (a time-optimal plan braking at its acceleration limit leaves none
 to brake harder, and its window's bounds count every term at its worst):
 
-- a hold takes a reference stop of :mod:`spm_opt.hold_room` (r to 0 with |ṙ| ≤ R and
+- a hold takes a reference stop of :mod:`spm_opt.judge.hold_room` (r to 0 with |ṙ| ≤ R and
   |r̈| ≤ Q), the quickest that fits of those within :data:`HOLD_SHARES` of the problem's
   ``hold_within_s``, checked the same way, where it is quicker than the change above or
   that one does not fit. Every plan the evaluator passes leaves the whole bound's stop
   room from any steady feed up to 1 (the planners keep it); above 1, its bounds scale with
   the feed (the stop of the plan run that much faster, whose room the ceiling keeps,
-  :func:`feed_ceiling`), so it lasts no longer. With none that fits,
-  :class:`NoRoom`: the executor ends the run in the safe stop at once, never waiting;
+  :func:`~spm_opt.execution.ceiling.feed_ceiling`), so it lasts no longer. With none that
+  fits, :class:`NoRoom`: the executor ends the run in the safe stop at once, never waiting;
 - a higher feed (a resume) goes in stages: the highest of :data:`STAGES` of it that fits
   now, and the whole of it, tried again each cycle, as soon as the plan gives room (a plan
   at its acceleration or jerk limit leaves room at 90 % of its pace);
@@ -55,15 +55,12 @@ from dataclasses import dataclass
 import numpy as np
 import ruckig
 
-from spm_opt.errors import InputError
-from spm_opt.evaluate import evaluate
-from spm_opt.execution.tracking import Lead, led_goals_outside
-from spm_opt.hold_room import hold_stop
-from spm_opt.input_limits import excerpt
-from spm_opt.limits import RULES
-from spm_opt.problem import Problem
-from spm_opt.ruckig_local import calculate_locally
-from spm_opt.trajectory import Trajectory
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
+from spm_opt.base.ruckig_local import calculate_locally
+from spm_opt.judge.hold_room import hold_stop
+from spm_opt.judge.limits import RULES
+from spm_opt.problem.trajectory import Trajectory
 
 HEADROOM = 0.98
 """Fraction of each joint limit the feed's bounds on ṙ and r̈ are derived for; the rest
@@ -78,9 +75,6 @@ MAX_FEED_JERK_PER_S2 = 400.0
 
 FEED_STEP = 0.1
 """The override's step from the keys, and its lowest value from them (a fraction)."""
-
-CEILING_RESOLUTION = 0.01
-"""The feed ceiling is found to this fraction."""
 
 LONGEST_CHANGE_S = 2.0
 """Longest change of the feed tried, s: a longer one (its bounds shrunk far) costs its check
@@ -132,31 +126,6 @@ class Pace:
     feed: float
     feed_rate_per_s: float
     target: float
-
-
-def feed_ceiling(
-    problem: Problem, trajectory: Trajectory, most: float, lead: Lead | None = None
-) -> float:
-    """The highest feed up to ``most`` (at least 1) at which the plan run that much faster
-    breaks no limit the plan itself keeps, as the evaluator judges it (to 1 %), and the
-    goals ``lead`` leads from it stay inside the joint range and the Velocity Limit."""
-    if most <= 1.0:
-        return most
-    kept = {v.rule for v in evaluate(problem, trajectory).violations}
-
-    def allowed(rate: float) -> bool:
-        scaled = trajectory.time_scaled(rate)
-        if not {v.rule for v in evaluate(problem, scaled).violations} <= kept:
-            return False
-        return lead is None or not led_goals_outside(lead, scaled, problem.robot)
-
-    if allowed(most):
-        return most
-    low, high = 1.0, most
-    while high - low > CEILING_RESOLUTION:
-        middle = 0.5 * (low + high)
-        low, high = (middle, high) if allowed(middle) else (low, middle)
-    return low
 
 
 class FeedProfile:
@@ -438,7 +407,8 @@ class FeedRequests:
     """What the operator asks for, from any thread: a feed override, hold and resume.
 
     The feed the executor heads for is 0 while held, else the override, never above
-    ``ceiling`` (see :func:`feed_ceiling`): this is the one place the ceiling applies.
+    ``ceiling`` (see :func:`~spm_opt.execution.ceiling.feed_ceiling`): this is the one
+    place the ceiling applies.
     """
 
     def __init__(self, feed: float = 1.0, ceiling: float = 1.0) -> None:

@@ -26,6 +26,7 @@ import json
 import os
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -33,9 +34,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
+from spm_opt.base.files import json_default, write_atomically
+from spm_opt.base.input_limits import (
+    LOG_KIND,
+    MAX_LOG_ROWS,
+    check_log_header,
+    first_line,
+    log_rows,
+)
 from spm_opt.execution.results import LogReport
-from spm_opt.files import json_default, write_atomically
 
 COLUMNS = (
     "time_s",
@@ -389,3 +397,24 @@ def read_log(path: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
     sidecar = header_path(path)
     header = json.loads(sidecar.read_text()) if sidecar.is_file() else {}
     return table, header
+
+
+def read_execution_log(path: str | Path) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """:func:`read_log`, every way of failing an
+    :class:`InputError`: the log at most :data:`MAX_LOG_BYTES` and :data:`MAX_LOG_ROWS`
+    rows (counted before pandas parses them), its header beside it JSON of at most
+    :data:`MAX_SIDECAR_BYTES`."""
+    path = Path(path)
+    rows = log_rows(path)
+    if rows > MAX_LOG_ROWS:
+        raise InputError(
+            f"{path}: {rows:,} rows; expected {LOG_KIND} of at most {MAX_LOG_ROWS:,} rows "
+            "(log a shorter run: minutes identify a robot)"
+        )
+    check_log_header(header_path(path))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", pd.errors.DtypeWarning)
+            return read_log(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        raise InputError(f"log {path}: not a CSV log ({first_line(error)})") from None

@@ -1,11 +1,11 @@
 """Pre-flight: what a plan must be before the executor lets it move the robot.
 
-Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this order:
+Each check raises a one-line :class:`~spm_opt.base.errors.PreflightError`, in this order:
 
 1. **Made for this problem.** The plan's metadata records the problem it was planned for
-   (:meth:`~spm_opt.problem.Problem.record`); its fingerprint (the landmarks, the limits
+   (:meth:`~spm_opt.problem.problem.Problem.record`); its fingerprint (the landmarks, the limits
    and the robot, not the file's bytes) must be this problem's
-   (:func:`spm_opt.provenance.check_made_for`, as ``review`` and ``evaluate`` check it).
+   (:func:`spm_opt.problem.provenance.check_made_for`, as ``review`` and ``evaluate`` check it).
    A plan that records none (no sidecar, or one written by hand) or another runs only
    when asked for on purpose (``other_problem``), and is then still judged by this
    problem's limits.
@@ -20,7 +20,7 @@ Each check raises a one-line :class:`~spm_opt.errors.PreflightError`, in this or
    The planners end at rest exactly; the paper's cubic starts with an acceleration of
    0.014 rad/s².
 3. **Within the robot's limits,** as the evaluator judges them: every rule that
-   :mod:`spm_opt.limits` says judges the robot (joint range, speed, acceleration, jerk,
+   :mod:`spm_opt.judge.limits` says judges the robot (joint range, speed, acceleration, jerk,
    torque, current, singularity). The cut's own figures are the planner's business.
 4. **Starting inside the joint range.**
 5. **Led goals the actuators take.** The goals the executor sends lead the plan by the
@@ -35,7 +35,7 @@ Once connected, before anything moves:
    logs at the loop's rate (:func:`check_log_room`).
 
 A CSV whose samples are not those its sidecar records never gets this far:
-:meth:`~spm_opt.trajectory.Trajectory.from_csv` refuses it.
+:meth:`~spm_opt.problem.trajectory.Trajectory.from_csv` refuses it.
 """
 
 from __future__ import annotations
@@ -47,16 +47,16 @@ from typing import Any
 
 import numpy as np
 
-from spm_opt import provenance
-from spm_opt.errors import PreflightError
-from spm_opt.evaluate import evaluate
+from spm_opt.base.errors import PreflightError
 from spm_opt.execution.feed import JointLimits
 from spm_opt.execution.log import bytes_needed
 from spm_opt.execution.tracking import Lead, led_goals_outside
-from spm_opt.limits import ROBOT, RULES
+from spm_opt.judge.evaluate import evaluate
+from spm_opt.judge.limits import ROBOT, RULES
 from spm_opt.model.params import DEG
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem import provenance
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 _LOG = logging.getLogger(__name__)
 

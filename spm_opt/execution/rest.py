@@ -4,10 +4,12 @@ rest only over a window of readings, never on one."""
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 
 from spm_opt.execution.backend import CLOCK_EPSILON_S, Measurement
+from spm_opt.execution.cycle import ControlLoop, Cycle
 from spm_opt.execution.feed import Pace
 from spm_opt.execution.settings import ExecutionSettings
 from spm_opt.model.actuator import Actuator
@@ -86,3 +88,32 @@ class FeedHoldWatch:
     def too_long(self, time_s: float) -> bool:
         """The hold has lasted longer than ``max_hold_s``."""
         return self._since is not None and time_s - self._since > self._settings.max_hold_s
+
+
+def hold_until_rest(
+    loop: ControlLoop,
+    phase: str,
+    target: np.ndarray,
+    limit_s: float,
+    settings: ExecutionSettings,
+    actuator: Actuator,
+    inspect: Callable[[Cycle], None],
+    checked: bool,
+) -> tuple[float | None, RestWindow]:
+    """Hold ``target`` (rad), each cycle's reading given to ``inspect`` (which raises
+    :class:`~spm_opt.execution.cycle.Fault` on a fault; ``checked``: a run of failed
+    cycles is one too), until rest is confirmed or ``limit_s`` (s) passes; returns the time
+    rest was confirmed (None if not) and the window."""
+    loop.phase = phase
+    window = RestWindow(settings, actuator)
+    begin = None
+    while True:
+        cycle = loop.begin()
+        begin = cycle.time_s if begin is None else begin
+        inspect(cycle)
+        loop.send(cycle, target, np.zeros(2), np.zeros(2))
+        loop.end(phase, cycle, checked=checked)
+        if window.add(cycle.time_s, cycle.measurement):
+            return cycle.time_s, window
+        if cycle.time_s - begin >= limit_s - CLOCK_EPSILON_S:
+            return None, window

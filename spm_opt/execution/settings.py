@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
 from spm_opt.execution.feed import FEED_STEP, JointLimits
 from spm_opt.execution.tracking import TRACKING_MODES
-from spm_opt.input_limits import excerpt
 from spm_opt.model.params import DEG
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 
 @dataclass(frozen=True)
@@ -73,7 +73,7 @@ class ExecutionSettings:
         ``Executor.set_feed(0)``) is another matter.
     max_feed : float
         Highest override allowed, if every limit allows it (see
-        :func:`~spm_opt.execution.feed.feed_ceiling`).
+        :func:`~spm_opt.execution.ceiling.feed_ceiling`).
     max_hold_s : float, s
         Longest feed hold; a longer one ends in the safe stop.
     other_problem : bool

@@ -31,11 +31,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spm_opt.choices import TRACKING_MODES
-from spm_opt.limits import RULES
+from spm_opt.base.choices import TRACKING_MODES
+from spm_opt.judge.limits import RULES
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import Robot
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,20 @@ def led_goals_outside(lead: Lead, trajectory: Trajectory, robot: Robot) -> str:
     joint range or outrun its actuators' Velocity Limit ("" if they do neither; the limit
     allowed the evaluator's 0.5 %)."""
     times = trajectory.time_grid()
-    position, rate, acceleration, jerk = trajectory.states(times)
+    return led_samples_outside(lead, robot, times, *trajectory.states(times))
+
+
+def led_samples_outside(
+    lead: Lead,
+    robot: Robot,
+    times: np.ndarray,
+    position: np.ndarray,
+    rate: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray,
+) -> str:
+    """:func:`led_goals_outside` of a reference sampled at ``times`` (N,), s: its
+    position, rate, acceleration and jerk (each (N, 2), SI)."""
     joint_range, velocity_limit = robot.joint_range, robot.actuator.velocity_limit_rad_s
     goals = lead.goal(position, rate, acceleration)
     for joint in range(2):

@@ -329,6 +329,27 @@ def actuator_torque(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     return robot.actuator.drive_torque(load, qd, qdd)
 
 
+def paced_torque_terms(
+    robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The model's torques (each (N, 2), N·m) split by how they follow the pace of a
+    motion, from one evaluation: the inertial and velocity terms M(q) q̈ + C(q, q̇) q̇,
+    gravity g(q) and the platforms' exact friction; with exact friction, τ is their sum.
+    Run f times as fast (q̇ → f q̇, q̈ → f² q̈), the first scales by f² and the others stay
+    (the friction's sign follows the direction of motion only)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    rest = np.zeros_like(q)
+    frictionless, _, exact = _torque_parts(
+        robot,
+        np.vstack([q, q]),
+        np.vstack([np.broadcast_to(qd, q.shape), rest]),
+        np.vstack([np.broadcast_to(qdd, q.shape), rest]),
+    )
+    samples = len(q)
+    gravity = frictionless[samples:]
+    return frictionless[:samples] - gravity, gravity, exact[:samples]
+
+
 def friction_torque(
     robot: Robot, q: np.ndarray, qd: np.ndarray, *, exact: bool = True
 ) -> np.ndarray:

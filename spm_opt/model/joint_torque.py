@@ -1,6 +1,6 @@
 """The joint side of the actuators' torque, as the planners bound it: the load torque (with
 smooth friction) plus the drives' rotor inertia J q̈, viscous friction f_v q̇ and Coulomb
-friction f_c σ(q̇), N·m per joint (:func:`spm_opt.limits.planner_bounds` translates the
+friction f_c σ(q̇), N·m per joint (:func:`spm_opt.judge.limits.planner_bounds` translates the
 actuators' torque and current limits to a bound on it).
 
 In CasADi (:func:`load_torque`) it reads the B-spline torque table of

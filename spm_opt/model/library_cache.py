@@ -46,7 +46,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 
 _LOG = logging.getLogger(__name__)
 

@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from spm_opt.errors import UnreachableError
-from spm_opt.fields import Table, apply_overrides, read_toml
+from spm_opt.base.errors import UnreachableError
+from spm_opt.base.fields import Table, apply_overrides, read_toml
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import ACTUATORS, LOOP_RATE_RANGE_PER_S, Actuator, CurrentTorqueMap
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 _STEP = 1e-6
 """Arc-length fraction of the central differences along a segment."""

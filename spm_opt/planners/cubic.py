@@ -14,10 +14,10 @@ import numpy as np
 from numpy.polynomial import Polynomial
 from scipy.interpolate import PPoly
 
-from spm_opt.errors import PlanningError
+from spm_opt.base.errors import PlanningError
 from spm_opt.planners.registry import planner_options, register
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 
 def _position(tau: float) -> list[float]:

@@ -46,10 +46,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from spm_opt.errors import PlanningError
-from spm_opt.evaluate import evaluate
-from spm_opt.interrupt import solve
-from spm_opt.limits import planner_bounds
+from spm_opt.base.errors import PlanningError
+from spm_opt.base.interrupt import solve
+from spm_opt.judge.evaluate import evaluate
+from spm_opt.judge.limits import planner_bounds
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
 from spm_opt.model.joint_torque import dynamics_parameters, load_torque, range_key
@@ -61,8 +61,8 @@ from spm_opt.model.regressor import (
     link_function,
 )
 from spm_opt.planners.registry import planner_options, register, settings_from_options
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 RANGE_CLEARANCE_RAD = np.deg2rad(0.5)
 """How far inside the joint range the grid points stay, rad: the range is hard, and the
@@ -233,7 +233,9 @@ class ExcitationPlanner:
         design = _Design(problem, settings, base, centre, basis)
         coefficients, statistics = design.solve()
         trajectory = _trajectory(centre, coefficients, settings, statistics)
-        broken = evaluate(problem, trajectory).violations  # the robot's: it ignores the contour
+        # the evaluator decides whether the plan is refused (the robot's limits: it ignores
+        # the contour); the report stays with the plan for whoever asked to judge it
+        broken = evaluate(problem, trajectory).violations
         if broken:
             raise PlanningError(f"excitation: the plan breaks {broken[0]}")
         return trajectory

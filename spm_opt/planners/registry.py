@@ -8,13 +8,13 @@ import math
 import time
 from typing import Any, Protocol, TypeVar
 
-from spm_opt.errors import InputError, PlanningError, UnknownPlannerError
-from spm_opt.fields import closest
-from spm_opt.input_limits import excerpt
-from spm_opt.problem import Problem
-from spm_opt.skull.depth import depth_setpoint
-from spm_opt.trajectory import Trajectory
-from spm_opt.version import package_version
+from spm_opt.base.errors import InputError, PlanningError, UnknownPlannerError
+from spm_opt.base.fields import closest
+from spm_opt.base.input_limits import excerpt
+from spm_opt.base.version import package_version
+from spm_opt.judge.depth import depth_setpoint
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 
 class Planner(Protocol):

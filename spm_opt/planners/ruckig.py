@@ -34,7 +34,7 @@ exceeds it (at most ``MAX_ROUNDS``). On the project's problems no cap has needed
 
 Torque. Ruckig knows no dynamics: the whole plan's actuator torque (the model through the
 actuator, as the evaluator measures it) is checked on a 1 kHz grid, and while it exceeds
-the limit (:func:`spm_opt.limits.torque_limit`) the acceleration and jerk limits are
+the limit (:func:`spm_opt.judge.limits.torque_limit`) the acceleration and jerk limits are
 lowered by ``TORQUE_STEP`` and every segment solved again (at most ``MAX_ROUNDS``).
 
 Local only. Ruckig's community edition sends problems with intermediate waypoints to a
@@ -58,14 +58,14 @@ import numpy as np
 import ruckig
 from scipy.interpolate import PPoly
 
-from spm_opt.errors import PlanningError
-from spm_opt.limits import planner_bounds, torque_limit
+from spm_opt.base.errors import PlanningError
+from spm_opt.base.ruckig_local import calculate_locally
+from spm_opt.judge.limits import planner_bounds, torque_limit
 from spm_opt.model import dynamics
 from spm_opt.model.params import MM
 from spm_opt.planners.registry import planner_options, register, settings_from_options
-from spm_opt.problem import Problem
-from spm_opt.ruckig_local import calculate_locally
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 VIA_POINTS = ("stop", "pass-through")
 LINE_SAMPLES = 2001

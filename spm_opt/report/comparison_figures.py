@@ -12,12 +12,11 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from spm_opt.figure_rules import mark_top_view
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
-from spm_opt.plots import moving_grid
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 from spm_opt.report.columns import column
+from spm_opt.report.figure_rules import mark_top_view
 from spm_opt.report.planner_style import (
     Limit,
     contour_tubes,
@@ -26,12 +25,13 @@ from spm_opt.report.planner_style import (
     new_figure,
     planner_style,
 )
+from spm_opt.report.plots import moving_grid
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from spm_opt.trajectory import Trajectory
+    from spm_opt.problem.trajectory import Trajectory
 
 
 class Measured(Protocol):
@@ -97,7 +97,7 @@ def _samples(
     outcome: Planned, moving: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """t (N,), s, and q, q̇, q̈ (N, 2) of a plan on the drawing grid; ``moving``: its ends
-    just inside the plan, where it moves (:func:`spm_opt.plots.moving_grid`)."""
+    just inside the plan, where it moves (:func:`spm_opt.report.plots.moving_grid`)."""
     trajectory = outcome.trajectory
     assert trajectory is not None
     t = moving_grid(trajectory, RATE_HZ) if moving else trajectory.time_grid(RATE_HZ)

@@ -7,9 +7,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import TYPE_CHECKING, NamedTuple
 
-from spm_opt.limits import contour_tube
+from spm_opt.judge.limits import contour_tube
 from spm_opt.model.params import MM
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 from spm_opt.report.columns import column
 
 if TYPE_CHECKING:

@@ -25,7 +25,7 @@ from spm_opt.report.review_verdict import (
     verdict_line,
     violation_points,
 )
-from spm_opt.report.robot_geometry import robot_pose
+from spm_opt.report.robot_geometry import ROBOT_PARTS, robot_pose
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
@@ -35,11 +35,11 @@ if TYPE_CHECKING:
     from matplotlib.transforms import Transform
     from mpl_toolkits.mplot3d import Axes3D
 
-    from spm_opt.evaluate import Report, Violation
-    from spm_opt.problem import Problem
-    from spm_opt.report.review import ReviewInputs
+    from spm_opt.judge.report import Report, Violation
+    from spm_opt.problem.problem import Problem
+    from spm_opt.problem.trajectory import Trajectory
+    from spm_opt.report.review_inputs import ReviewInputs
     from spm_opt.skull.surface import Skull
-    from spm_opt.trajectory import Trajectory
 
 MAX_DRAWN_FACES = 3000
 """The skull's patch is decimated to this many faces for matplotlib."""
@@ -57,14 +57,6 @@ ROBOT_ZOOM = 0.85
 """The robot's box drawn this much smaller than its panel, so that its z label stays in it."""
 MAX_LISTED = 8
 """Most violations the figure numbers and lists (review.html lists them all)."""
-_PARTS = (
-    ("upper_arc", "upper arc (θ1)", "tab:blue", 2.5),
-    ("lower_arc", "lower arc (θ2)", "tab:orange", 2.5),
-    ("upper_platform", "upper platform", "tab:blue", 1.5),
-    ("lower_platform", "lower platform", "tab:orange", 1.5),
-    ("tool", "tool", "0.15", 1.5),
-)
-"""Each of the robot's parts: its field, label, colour and line width."""
 
 
 def review_png(
@@ -79,12 +71,12 @@ def review_png(
     skull : Skull
     given : ReviewInputs
         The plan, and a log with the judge's reports of it
-        (:func:`spm_opt.report.review.review_inputs`).
+        (:func:`spm_opt.report.review_inputs.review_inputs`).
     report : Report, optional
         The plan's report; by default ``evaluate(problem, trajectory)``.
     """
-    from spm_opt.evaluate import evaluate
-    from spm_opt.plots import to_png
+    from spm_opt.judge.evaluate import evaluate
+    from spm_opt.report.plots import to_png
 
     trajectory = given.trajectory
     report = evaluate(problem, trajectory) if report is None else report
@@ -230,8 +222,10 @@ def _draw_robot(
     """The robot at the plan's start over the skull and the planned contour."""
     _add_skull(axis, skull)
     pose = robot_pose(problem.robot, trajectory.position([trajectory.start_time])[0])
-    for field, label, colour, width in _PARTS:
-        axis.plot(*(getattr(pose, field) / MM).T, color=colour, linewidth=width, label=label)
+    for part in ROBOT_PARTS:
+        axis.plot(
+            *part.points(pose).T, color=part.png_colour, linewidth=part.png_width, label=part.name
+        )
     axis.plot(*scene.contour.T, color="tab:green", linewidth=1.5, label="planned contour")
     reach = max(problem.robot.upper_arc.rail_radius, problem.robot.upper_platform_radius) / MM
     axis.set(xlim=(-reach, reach), ylim=(-reach, reach), zlim=(0.0, reach))

@@ -14,16 +14,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.model import kinematics
 from spm_opt.model.params import DEG, MM
 
 if TYPE_CHECKING:
     import pandas as pd
 
-    from spm_opt.problem import Problem
+    from spm_opt.problem.problem import Problem
+    from spm_opt.problem.trajectory import Trajectory
     from spm_opt.skull.surface import Skull
-    from spm_opt.trajectory import Trajectory
 
 SKULL_REACH = 45.0 * DEG
 """The skull is drawn this far (rad) from the flap's mean landmark direction, or farther
@@ -101,7 +101,7 @@ def review_scene(
     problem: Problem, skull: Skull, trajectory: Trajectory, log: pd.DataFrame | None = None
 ) -> ReviewScene:
     """The scene of a plan, and of its execution when ``log`` (an execution log's table,
-    :func:`spm_opt.input_limits.read_execution_log`) is given."""
+    :func:`spm_opt.execution.log.read_execution_log`) is given."""
     directions = problem.landmarks / np.linalg.norm(problem.landmarks, axis=1, keepdims=True)
     centre = directions.mean(axis=0)
     centre /= np.linalg.norm(centre)

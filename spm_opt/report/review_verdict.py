@@ -1,8 +1,8 @@
 """What the review page and its PNG say of the cuts: the judge's verdicts, not figures of
-their own. The plan is judged by :func:`spm_opt.evaluate.evaluate` against the plan's tube
+their own. The plan is judged by :func:`spm_opt.judge.evaluate.evaluate` against the plan's tube
 (the contour tolerance less the execution reserve), a run by
-:func:`spm_opt.evaluate_execution.evaluate_log` against the whole contour tolerance
-(:func:`spm_opt.limits.contour_tube`): the reports ``spm-opt evaluate`` prints.
+:func:`spm_opt.verify.executed_cut.evaluate_log` against the whole contour tolerance
+(:func:`spm_opt.judge.limits.contour_tube`): the reports ``spm-opt evaluate`` prints.
 """
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spm_opt.limits import contour_tube
+from spm_opt.judge.limits import contour_tube
 from spm_opt.model.params import MM
 
 if TYPE_CHECKING:
-    from spm_opt.evaluate import Report, Violation
-    from spm_opt.evaluate_execution import LogReports
-    from spm_opt.problem import Problem
+    from spm_opt.judge.report import Report, Violation
+    from spm_opt.problem.problem import Problem
+    from spm_opt.verify.executed_cut import LogReports
 
 PLAN = "plan"
 RUN = "run"
@@ -61,7 +61,7 @@ class Judged:
 
 
 def judged_cuts(problem: Problem, plan: Report, run: LogReports | None = None) -> list[Judged]:
-    """The plan's judgement and, with ``run`` (:func:`~spm_opt.evaluate_execution.
+    """The plan's judgement and, with ``run`` (:func:`~spm_opt.verify.executed_cut.
     evaluate_log`'s reports of its log), the run's: measured, then true when traced."""
     planned_tube, executed_tube = contour_tube(problem), contour_tube(problem, executed=True)
     cuts = [Judged(PLAN, "planned cut", plan, _mm(planned_tube))]

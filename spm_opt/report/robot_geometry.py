@@ -6,6 +6,7 @@ N_u = Rx(θ1) ŷ, from +x over the top to −x; the lower arc's in the plane nor
 N_L = Ry(θ2) x̂, from +y to −y. Each platform is a rectangle about its mass centre on the
 radial line through B (at r_u and r_L), spanned by its frame's x and y axes (Eq. 17),
 longer along its rail. The tool runs from the isocenter along B past the upper platform.
+How the review page and its PNG draw each part is one table, :data:`ROBOT_PARTS`.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from spm_opt.model import kinematics
-from spm_opt.model.params import Robot
+from spm_opt.model.params import MM, Robot
 
 ARC_SAMPLES = 61
 """Points along each arc's half circle."""
@@ -44,6 +45,33 @@ class RobotPose:
     upper_platform: np.ndarray
     lower_platform: np.ndarray
     tool: np.ndarray
+
+
+@dataclass(frozen=True)
+class DrawnPart:
+    """How the review draws one of the robot's parts: its :class:`RobotPose` field, its name,
+    and its colour and line width on the page (plotly, px) and in the PNG (matplotlib, pt)."""
+
+    field: str
+    name: str
+    page_colour: str
+    png_colour: str
+    page_width: float
+    png_width: float
+
+    def points(self, pose: RobotPose) -> np.ndarray:
+        """The part's polyline (k, 3) at ``pose``, mm."""
+        return getattr(pose, self.field) / MM
+
+
+ROBOT_PARTS = (
+    DrawnPart("upper_arc", "upper arc (θ1)", "#1f77b4", "#1f77b4", 6, 2.5),
+    DrawnPart("lower_arc", "lower arc (θ2)", "#ff7f0e", "#ff7f0e", 6, 2.5),
+    DrawnPart("upper_platform", "upper platform", "#1f77b4", "#1f77b4", 9, 1.5),
+    DrawnPart("lower_platform", "lower platform", "#ff7f0e", "#ff7f0e", 9, 1.5),
+    DrawnPart("tool", "tool", "#222222", "0.15", 4, 1.5),
+)
+"""The robot's parts as the review page and its PNG draw them, in the legends' order."""
 
 
 def robot_pose(robot: Robot, q: np.ndarray) -> RobotPose:

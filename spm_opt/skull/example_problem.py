@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from spm_opt.files import write_atomically
+from spm_opt.base.files import write_atomically
+from spm_opt.model.rigid import apply
 from spm_opt.skull.frames import to_ras
 from spm_opt.skull.generate import generate_skull, write_example
-from spm_opt.skull.registration import apply
 
 SEGMENT_DURATION_S = 10.0
 LIMITS = {

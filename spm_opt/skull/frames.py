@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from spm_opt.errors import InputError
-from spm_opt.input_limits import excerpt
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
 
 FRAMES = ("RAS", "LPS")
 """The frames a mesh or a markups file may be in, spelt in upper case."""

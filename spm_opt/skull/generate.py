@@ -26,9 +26,9 @@ import trimesh
 from scipy.spatial.transform import Rotation
 from trimesh.ray.ray_triangle import RayMeshIntersector
 
-from spm_opt.errors import InputError
-from spm_opt.files import write_atomically
-from spm_opt.input_limits import excerpt
+from spm_opt.base.errors import InputError
+from spm_opt.base.files import write_atomically
+from spm_opt.base.input_limits import excerpt
 from spm_opt.skull.frames import FRAMES, check_frame, to_ras
 from spm_opt.skull.markups import markups_text
 

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from spm_opt.errors import InputError
-from spm_opt.files import write_atomically
-from spm_opt.input_limits import decode_text, excerpt, read_bytes
+from spm_opt.base.errors import InputError
+from spm_opt.base.files import write_atomically
+from spm_opt.base.input_limits import decode_text, excerpt, read_bytes
 from spm_opt.skull.frames import to_ras
 
 MAX_MARKUPS_BYTES = 10 << 20

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spm_opt.errors import InputError, require
+from spm_opt.base.errors import InputError, require
 from spm_opt.skull.frames import check_frame, frame_matrix
 
 if TYPE_CHECKING:

@@ -27,19 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from spm_opt.errors import InputError
-from spm_opt.fields import Table
+from spm_opt.base.errors import InputError
+from spm_opt.base.fields import Table
 from spm_opt.model.params import MM
+from spm_opt.model.rigid import Registration, apply
 from spm_opt.skull.frames import FRAMES, to_ras
 from spm_opt.skull.landmark_surface import LandmarkSurface
 from spm_opt.skull.markups import read_markups
-from spm_opt.skull.registration import (
-    Registration,
-    apply,
-    check_residuals,
-    check_transform,
-    fit_rigid,
-)
+from spm_opt.skull.registration import check_residuals, check_transform, fit_rigid
 from spm_opt.skull.surface import Skull
 
 MAX_LANDMARK_SHIFT_MM = 5.0

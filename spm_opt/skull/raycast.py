@@ -6,7 +6,9 @@ the inner surface's where it leaves the inner mesh. Every crossing is found in o
 the mesh's ray engine (Embree where ``embreex`` is installed, in single precision; else
 trimesh's rtree engine, in batches that bound its memory); each triangle found is then
 intersected with the ray again in double precision, so radii are exact to rounding on the
-triangulated surface.
+triangulated surface (a ray that the single-precision engine sends to the facet beside the
+one it crosses meets that facet's plane just past their edge: 1.9e-12 m off at a pole of
+the test ellipsoid).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spm_opt.errors import require
+from spm_opt.base.errors import require
 
 if TYPE_CHECKING:
     import trimesh

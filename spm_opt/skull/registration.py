@@ -8,13 +8,12 @@ to the robot's frame, mm.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from spm_opt.errors import InputError
-from spm_opt.input_limits import excerpt
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
+from spm_opt.model.rigid import Registration, best_rigid_fit
 
 MAX_FIDUCIAL_CONDITION = 10.0
 """Largest condition number of a set of fiducials: the ratio of the two largest singular
@@ -28,29 +27,11 @@ ORTHONORMAL_TOLERANCE = 1e-6
 _RIGID = "a rigid transform: rotation and translation in mm; a mirror or scale is not allowed"
 
 
-@dataclass(frozen=True)
-class Registration:
-    """A rigid fit of fiducials located in the image and by the robot.
-
-    Attributes
-    ----------
-    matrix_mm : ndarray (4, 4)
-        From the image's RAS coordinates, mm, to the robot's frame, mm.
-    rms_mm : float
-        The fiducial registration error: the RMS of :attr:`residuals_mm`, mm.
-    residuals_mm : ndarray (n,)
-        Distance from each robot fiducial to its image fiducial once transformed, mm.
-    """
-
-    matrix_mm: np.ndarray
-    rms_mm: float
-    residuals_mm: np.ndarray
-
-
 def fit_rigid(image_mm: np.ndarray, robot_mm: np.ndarray, field: str) -> Registration:
     """The rigid transform that best takes the image fiducials (n, 3), mm, onto the robot
-    fiducials (n, 3), mm, in the least-squares sense (Kabsch's fit:
-    ``Rotation.align_vectors`` on the centred points; a rotation, never a mirror).
+    fiducials (n, 3), mm, in the least-squares sense (:func:`spm_opt.model.rigid.best_rigid_fit`:
+    a rotation, never a mirror); its matrix is from the image's RAS coordinates to the
+    robot's frame, its RMS the fiducial registration error.
 
     Raises InputError naming ``field`` for fewer than 3 fiducials, different counts,
     values that are not finite, or fiducials near one line (a condition number above
@@ -63,13 +44,7 @@ def fit_rigid(image_mm: np.ndarray, robot_mm: np.ndarray, field: str) -> Registr
             f"{field}: {len(image)} image fiducials but {len(robot)} robot fiducials; "
             "expected the same points located in both"
         )
-    image_centre, robot_centre = image.mean(axis=0), robot.mean(axis=0)
-    rotation, _ = Rotation.align_vectors(robot - robot_centre, image - image_centre)
-    matrix = np.eye(4)
-    matrix[:3, :3] = rotation.as_matrix()
-    matrix[:3, 3] = robot_centre - matrix[:3, :3] @ image_centre
-    residuals = np.linalg.norm(apply(matrix, image) - robot, axis=1)
-    return Registration(matrix, float(np.sqrt(np.mean(residuals**2))), residuals)
+    return best_rigid_fit(image, robot)
 
 
 def _fiducials(value: np.ndarray, field: str, kind: str) -> np.ndarray:
@@ -159,9 +134,3 @@ def check_transform(matrix: object, field: str) -> np.ndarray:
 def _shown(value: object) -> object:
     """``value`` for a message: an array as a list (whose excerpt is one line)."""
     return value.tolist() if isinstance(value, np.ndarray) else value
-
-
-def apply(matrix_mm: np.ndarray, points_mm: np.ndarray) -> np.ndarray:
-    """Points (n, 3), mm, transformed by the homogeneous matrix (4, 4), mm."""
-    points = np.asarray(points_mm, dtype=float)
-    return points @ matrix_mm[:3, :3].T + matrix_mm[:3, 3]

@@ -26,7 +26,7 @@ from functools import cache
 import casadi as ca
 import numpy as np
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.model import kinematics
 from spm_opt.model.params import Body, Robot
 

@@ -6,8 +6,9 @@ that takes C to M (RMS error 0.587 mm), tracks an IR marker on the platform duri
 motion, maps its path to M and reports 0.731 mm between the centroids of the tracked and
 the desired paths. This module does each step:
 
-- :func:`rigid_registration`: ᴹ_C T by least squares (SVD, proper rotation, no scale),
-  with the residual RMS over the landmark pairs, the paper's "RMS error";
+- :func:`rigid_registration`: ᴹ_C T by least squares (proper rotation, no scale; the
+  fit of :mod:`spm_opt.model.rigid`), with the residual RMS over the landmark pairs, the
+  paper's "RMS error"; :func:`to_manipulator_frame` maps points with it;
 - :func:`path_deviation`: the paper's centroid distance, and the RMS and maximum
   closest-point distance from the tracked points to the desired path (a polyline);
 - :func:`synthetic_capture`: a seeded stand-in for the cameras, so the pipeline runs
@@ -15,7 +16,8 @@ the desired paths. This module does each step:
 - :func:`reference_landmarks`: 8 assumed landmark positions (the paper's are not published);
 - :func:`read_capture_csv`, :func:`read_landmarks_csv`: real captures from CSV files.
 
-SI inside (m, s); mm only on disk and in the fields of :class:`PathDeviation`.
+SI inside (m, s); mm only on disk, in the fields of :class:`PathDeviation` and in the
+:class:`~spm_opt.model.rigid.Registration` (the landmarks are converted to mm for the fit).
 
 What RMS error to expect: with isotropic Gaussian noise of σ per coordinate on the
 measured landmarks (and σ_M on the model positions), the N residuals keep 3N − 6 of the
@@ -36,9 +38,10 @@ from scipy.linalg import svd
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from spm_opt.errors import InputError
-from spm_opt.input_limits import excerpt
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
 from spm_opt.model.params import MM, Robot
+from spm_opt.model.rigid import Registration, apply, best_rigid_fit
 
 __all__ = [
     "CAPTURE_COLUMNS",
@@ -46,7 +49,6 @@ __all__ = [
     "Capture",
     "MarkerTrack",
     "PathDeviation",
-    "Registration",
     "closest_point_distances",
     "path_deviation",
     "read_capture_csv",
@@ -54,6 +56,7 @@ __all__ = [
     "reference_landmarks",
     "rigid_registration",
     "synthetic_capture",
+    "to_manipulator_frame",
 ]
 
 CAPTURE_COLUMNS = ("time_s", "x_mm", "y_mm", "z_mm")
@@ -113,60 +116,11 @@ def _frozen(array: np.ndarray) -> np.ndarray:
 # --- registration --------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class Registration:
-    """A rigid transform ᴹ_C T from the camera frame C to the manipulator frame M.
-
-    A point maps as p_M = rotation @ p_C + translation.
-
-    Attributes
-    ----------
-    rotation : ndarray, shape (3, 3)
-        Proper rotation (det = +1) from C to M.
-    translation : ndarray, shape (3,), m
-        The origin of C expressed in M.
-    rms_error_m : float, m
-        RMS over the pairs of the residual |T p_C,i − p_M,i| (the paper's "RMS error").
-    residuals_m : ndarray, shape (N,), m
-        The residual distance of each landmark pair.
-    """
-
-    rotation: np.ndarray
-    translation: np.ndarray
-    rms_error_m: float
-    residuals_m: np.ndarray
-
-    @property
-    def matrix(self) -> np.ndarray:
-        """The homogeneous 4 × 4 matrix ᴹ_C T (translation in m)."""
-        matrix = np.eye(4)
-        matrix[:3, :3] = self.rotation
-        matrix[:3, 3] = self.translation
-        return matrix
-
-    def apply(self, points_c: np.ndarray) -> np.ndarray:
-        """Map points from C to M.
-
-        Parameters
-        ----------
-        points_c : ndarray, shape (N, 3) or (3,), m
-            Points in the camera frame.
-
-        Returns
-        -------
-        ndarray, same shape, m
-            The points in the manipulator frame.
-        """
-        points = _points("points_c", points_c, single=True)
-        return points @ self.rotation.T + self.translation
-
-
 def rigid_registration(camera_points: np.ndarray, model_points: np.ndarray) -> Registration:
     """The rigid transform taking landmarks measured in C onto their known positions in M.
 
     Least squares over the pairs, min Σ |R c_i + t − m_i|² with R a proper rotation and no
-    scale (Kabsch/Umeyama: SVD of the cross-covariance of the centred points, the last
-    singular direction flipped if the best orthogonal fit would be a reflection).
+    scale (:func:`spm_opt.model.rigid.best_rigid_fit`, on the points converted to mm).
 
     Parameters
     ----------
@@ -178,6 +132,8 @@ def rigid_registration(camera_points: np.ndarray, model_points: np.ndarray) -> R
     Returns
     -------
     Registration
+        In mm: ᴹ_C T with its translation in mm, the residuals and their RMS (the paper's
+        "RMS error") in mm.
 
     Raises
     ------
@@ -194,22 +150,14 @@ def rigid_registration(camera_points: np.ndarray, model_points: np.ndarray) -> R
         )
     _check_not_collinear("camera_points", camera)
     _check_not_collinear("model_points", model)
+    return best_rigid_fit(camera / MM, model / MM)
 
-    camera_centroid = camera.mean(axis=0)
-    model_centroid = model.mean(axis=0)
-    covariance = (camera - camera_centroid).T @ (model - model_centroid)
-    u, _, vt = svd(covariance)
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-    rotation = vt.T @ flip @ u.T
-    translation = model_centroid - rotation @ camera_centroid
 
-    residuals = np.linalg.norm(camera @ rotation.T + translation - model, axis=1)
-    return Registration(
-        rotation=_frozen(rotation),
-        translation=_frozen(translation),
-        rms_error_m=float(np.sqrt(np.mean(residuals**2))),
-        residuals_m=_frozen(residuals),
-    )
+def to_manipulator_frame(registration: Registration, points_c: np.ndarray) -> np.ndarray:
+    """Points in the camera frame C, shape (N, 3) or (3,), m, mapped to M by ``registration``
+    (from :func:`rigid_registration`); same shape, m."""
+    points = _points("points_c", points_c, single=True)
+    return apply(registration.matrix_mm, points / MM) * MM
 
 
 # --- deviation between a tracked and a desired path ------------------------------------

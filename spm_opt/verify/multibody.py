@@ -42,9 +42,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from spm_opt.errors import require
+from spm_opt.base.errors import require
 from spm_opt.model.params import Body, Robot
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.trajectory import Trajectory
 
 mujoco = require("mujoco", "the MuJoCo check (spm_opt.verify.multibody)")
 

@@ -13,11 +13,11 @@ import termios
 from collections.abc import Iterable
 from dataclasses import dataclass, fields
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
 from spm_opt.execution.protocol import (
     MAX_ID,
 )
-from spm_opt.input_limits import excerpt
 
 
 def _check_time(kind: str, name: str, value: float) -> None:

@@ -14,7 +14,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
+from spm_opt.base.input_limits import excerpt
 from spm_opt.execution.emulator.control_table import (
     FIRMWARE_ITEM,
     FIRMWARE_VERSION,
@@ -46,7 +47,6 @@ from spm_opt.execution.protocol import (
     build_status,
     layout_consistent,
 )
-from spm_opt.input_limits import excerpt
 from spm_opt.model.params import Robot
 
 INTERBYTE_TIMEOUT_S = 0.1

@@ -32,7 +32,7 @@ problem's durations where the timing keeps them (starting minimum energy from th
 minimum-time plan's solution instead saved 1-5 iterations, less than that plan costs). In
 the time domain
 ``ocp-min-time`` starts from toppra's time-optimal parameterisation of the contour
-(:func:`~spm_opt.planners.toppra.time_optimal_guess`, ~10 ms), and from the
+(:func:`~spm_opt.planners.toppra.guess.time_optimal_guess`, ~10 ms), and from the
 contour-following guess if IPOPT fails from there; the others start from the minimum-time
 plan re-timed to their durations (:mod:`~spm_opt.planners.ocp.guess`).
 """
@@ -40,7 +40,7 @@ plan re-timed to their durations (:mod:`~spm_opt.planners.ocp.guess`).
 from spm_opt.planners.ocp.planner import OcpPlanner
 from spm_opt.planners.ocp.settings import MIN_TIME_JERK_WEIGHT, OcpSettings
 from spm_opt.planners.registry import register
-from spm_opt.planners.toppra import time_optimal_guess
+from spm_opt.planners.toppra.guess import time_optimal_guess
 
 MIN_TIME = register(
     OcpPlanner(

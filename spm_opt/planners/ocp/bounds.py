@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from spm_opt.bounds import segment_lower_bounds
-from spm_opt.limits import PlannerBounds
+from spm_opt.judge.bounds import segment_lower_bounds
+from spm_opt.judge.limits import PlannerBounds
 from spm_opt.planners.ocp.constraints import ACCELERATION, JERK, LIMITS, POSITION, VELOCITY
 from spm_opt.planners.ocp.nlp import Nlp
 from spm_opt.planners.ocp.point import NODE
 from spm_opt.planners.ocp.transcription import STATE
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 MIN_INTERVAL_S = 1e-4
 """Shortest interval of the time grid, s. A phase squeezed to 1 ms in all (0.06 ms an
@@ -35,7 +35,7 @@ def nlp_bounds(
     durations: np.ndarray,
 ) -> dict[str, np.ndarray]:
     """lbx, ubx, lbg, ubg for one problem within ``bounds`` (the problem's limits as
-    :mod:`spm_opt.limits` translates them for a planner); ``durations``: the initial phase
+    :mod:`spm_opt.judge.limits` translates them for a planner); ``durations``: the initial phase
     durations (D,), s."""
     grid = nlp.grid
     m = grid.intervals

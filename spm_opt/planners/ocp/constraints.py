@@ -1,8 +1,8 @@
 """The constraint table: every limit the optimal-control planners keep, declared once.
 
 A :class:`Limit` names the bound that keeps it (a field of
-:class:`~spm_opt.limits.PlannerBounds`), the evaluator's rules
-(:data:`spm_opt.limits.RULES`) it answers for, and how the NLP keeps it: by rows of one
+:class:`~spm_opt.judge.limits.PlannerBounds`), the evaluator's rules
+(:data:`spm_opt.judge.limits.RULES`) it answers for, and how the NLP keeps it: by rows of one
 interval's function (its constraints, :class:`Constraint`), by the bounds of a variable (q, q̇, q̈ at
 the nodes, the jerk on the intervals), or both. The NLP's rows and their bounds, the
 variables' bounds, the report of the most violated row, the probe that moves check points
@@ -21,7 +21,7 @@ check points once the evaluator finds the cut running back between nodes), the j
 exactly, and the load torque at the two Gauss points; the joint range, acceleration and
 jerk are bounds on the nodes and controls. Each limit keeps a reserve of the planner's
 ``margin``; the acceleration and jerk bounds also keep a feed hold its room
-(:func:`~spm_opt.limits.planner_bounds`, :mod:`spm_opt.hold_room`).
+(:func:`~spm_opt.judge.limits.planner_bounds`, :mod:`spm_opt.judge.hold_room`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from spm_opt.limits import PlannerBounds
+from spm_opt.judge.limits import PlannerBounds
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp.point import GAUSS, INSIDE, NODE, SPEED_CONTROL, Point
 
@@ -98,11 +98,11 @@ class Limit:
     Attributes
     ----------
     bound : str or None
-        The :class:`~spm_opt.limits.PlannerBounds` field that bounds it, tightened by the
+        The :class:`~spm_opt.judge.limits.PlannerBounds` field that bounds it, tightened by the
         excess when the evaluator finds one of ``rules`` broken. None: a condition of the
         cut's geometry, kept exactly, with nothing to tighten.
     rules : tuple of str
-        The evaluator's rules (:data:`spm_opt.limits.RULES`) it keeps: a plan that breaks
+        The evaluator's rules (:data:`spm_opt.judge.limits.RULES`) it keeps: a plan that breaks
         one is solved again with its check points moved or ``bound`` tightened. A rule no
         limit keeps is a planning error.
     constraints : tuple of Constraint

@@ -1,25 +1,48 @@
-"""What no optimal-control planner can plan, refused before any NLP is built, each with
-its reason: a contour tube too narrow to have an interior, gravity beyond the torque limit
-at rest, and durations shorter than the speed limits allow."""
+"""What no optimal-control planner can plan, refused before any NLP is built, each with its
+reason; and the bounds the checks establish, which the planner goes on with.
+
+Refused: a contour tube too narrow to have an interior, gravity beyond the torque limit at
+rest, and durations shorter than the speed limits allow. Established (:class:`Plannable`):
+the planner's bounds, read from :mod:`spm_opt.judge.limits` once per plan, and the
+segments' shortest durations."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from spm_opt.bounds import segment_lower_bounds
-from spm_opt.errors import PlanningError
-from spm_opt.limits import contour_tube, planner_bounds
+from spm_opt.base.errors import PlanningError
+from spm_opt.judge.bounds import segment_lower_bounds
+from spm_opt.judge.limits import PlannerBounds, contour_tube, planner_bounds
 from spm_opt.model import dynamics
 from spm_opt.model.params import MM
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 MIN_CONTOUR_TOLERANCE = 1e-6
 """Narrowest contour tube the planners accept, m: a zero-width tube has no interior."""
 
 
-def check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.ndarray:
-    """Refuse what no solver can do, with the reason; return the segments' lower bounds
-    on their durations, s (:func:`spm_opt.bounds.segment_lower_bounds`)."""
+@dataclass(frozen=True)
+class Plannable:
+    """What the checks establish, for the planner to go on with.
+
+    Attributes
+    ----------
+    bounds : PlannerBounds
+        The problem's limits as the planner imposes them, its margin kept
+        (:func:`~spm_opt.judge.limits.planner_bounds`).
+    lower_bounds : ndarray, shape (segments,), s
+        The segments' shortest durations (:func:`spm_opt.judge.bounds.segment_lower_bounds`).
+    """
+
+    bounds: PlannerBounds
+    lower_bounds: np.ndarray
+
+
+def check_feasible_at_all(problem: Problem, timing: str, margin: float) -> Plannable:
+    """Refuse what no solver can do, with the reason; return the planner's bounds at
+    ``margin`` and the segments' lower bounds on their durations."""
     limits, names = problem.limits, problem.visit_names
     tube = contour_tube(problem)
     if tube is not None and tube < MIN_CONTOUR_TOLERANCE:
@@ -28,7 +51,8 @@ def check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.nd
             f"execution_reserve_mm = {limits.execution_reserve / MM:g}: the cut would have to "
             f"turn every corner exactly; leave a plan at least {MIN_CONTOUR_TOLERANCE / MM:g} mm"
         )
-    torque_limit = planner_bounds(problem, margin).load_torque
+    planner = planner_bounds(problem, margin)
+    torque_limit = planner.load_torque
     for visit in (0, len(names) - 1):
         holding = dynamics.gravity_torque(problem.robot, problem.waypoint_angles[visit])[0]
         if np.max(np.abs(holding)) > torque_limit:
@@ -57,4 +81,4 @@ def check_feasible_at_all(problem: Problem, timing: str, margin: float) -> np.nd
                 f"(max_tool_speed_mm_s, max_joint_speed_rpm) need at least {need[k]:.4g} s "
                 "along the contour; lengthen it or raise the limits"
             )
-    return bounds
+    return Plannable(planner, bounds)

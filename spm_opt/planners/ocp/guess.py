@@ -7,8 +7,8 @@ import numpy as np
 
 from spm_opt.planners.contour_guess import segment_motion
 from spm_opt.planners.ocp.transcription import Grid
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 
 def _visits(start: Trajectory | None, segments: int) -> np.ndarray | None:

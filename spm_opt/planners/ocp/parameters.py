@@ -8,7 +8,7 @@ import numpy as np
 
 from spm_opt.model.joint_torque import dynamics_parameters
 from spm_opt.model.params import MM
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 
 def arcs(problem: Problem) -> np.ndarray:

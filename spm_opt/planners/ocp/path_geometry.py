@@ -3,7 +3,8 @@ offset, and the map from the grid's coordinate to the arc length.
 
 Along segment k (length L, mm, between consecutive landmark visits) the contour's joint
 path q₀(s) (s the arc length, mm) is a cubic spline through the inverse kinematics of
-``samples`` points of the arc, exact at the landmarks. The cut may leave the contour by a
+``samples`` points of the arc, exact at the landmarks
+(:func:`spm_opt.planners.path.contour_joints`). The cut may leave the contour by a
 lateral offset d (mm, on the skull, towards the arc's pole): q(s, d) = q₀(s) + d v(s),
 v = ∂q/∂d from the direction Jacobian's pseudo-inverse applied to the arc's pole, over the
 cut point's displacement per radian sqrt(ρ² + (∇ρ·n)²) (so that d is the 3-D distance from
@@ -26,8 +27,8 @@ from scipy.interpolate import CubicSpline
 
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
-from spm_opt.planners.toppra import path_points
-from spm_opt.problem import Problem
+from spm_opt.planners.path import contour_joints, path_points
+from spm_opt.problem.problem import Problem
 
 CLUSTER = 1.5
 """Nodes of a corner zone at landmark distances ∝ (k / n)^1.5, finer near the landmark
@@ -130,9 +131,9 @@ def path_terms(
 ) -> list[dict[str, np.ndarray]]:
     """For each path, at its grid coordinates u (N,), mm: its :meth:`SegmentPath.geometry`,
     the cut point's speed metric G (N, 3: G11, G12, G22, mm²/rad², |ṡ_cut|² = q̇ᵀGq̇), and
-    the model's terms at q₀ moving along the path (toppra's: inertia with the rotors'
-    (N, 4), Coriolis and centrifugal per unit u̇², gravity, friction (N, 2)); the model
-    evaluated once for all paths."""
+    the model's terms at q₀ moving along the path (:func:`spm_opt.planners.path.path_points`:
+    inertia with the rotors' (N, 4), Coriolis and centrifugal per unit u̇², gravity,
+    friction (N, 2)); the model evaluated once for all paths."""
     parts = [path.geometry(u) for path, u in zip(paths, us, strict=True)]
     q, a1, a2 = (np.concatenate([part[name] for part in parts]) for name in ("q", "A1", "A2"))
     points = path_points(problem, q, a1, a2)
@@ -183,15 +184,14 @@ def segment_paths(
     """Every segment's path and grid. ``limits``: tool speed (mm/s), joint speed (rad/s),
     acceleration (rad/s²) and jerk (rad/s³); ``intervals``: (each end's, the middle's);
     ``zones``: the end zones' lengths over a ramp's, at rest ends and at landmarks passed."""
-    contour, angles = problem.contour, problem.waypoint_angles
+    contour = problem.contour
     ends = contour.landmark_arc_lengths
     count = len(problem.segment_durations)
+    lengths = [(ends[k + 1] - ends[k]) / MM for k in range(count)]
+    arcs = [np.linspace(0.0, length, samples) for length in lengths]
+    joints = contour_joints(problem, [s * MM for s in arcs])
     paths = []
-    for k in range(count):
-        length = (ends[k + 1] - ends[k]) / MM
-        s = np.linspace(0.0, length, samples)
-        q = problem.contour_angles(ends[k] + s * MM)
-        q[0], q[-1] = angles[k], angles[k + 1]
+    for k, (length, s, q) in enumerate(zip(lengths, arcs, joints, strict=True)):
         lateral = _lateral_vectors(problem, q, contour.normal[k])
         curves = CubicSpline(s, np.column_stack([q, lateral]))
         ramp = _ramp_length(curves, length, limits) / length

@@ -26,10 +26,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from spm_opt import interrupt
-from spm_opt.errors import PlanningError
-from spm_opt.evaluate import evaluate
-from spm_opt.limits import PlannerBounds, planner_bounds
+from spm_opt.base import interrupt
+from spm_opt.base.errors import PlanningError
+from spm_opt.judge.evaluate import evaluate
+from spm_opt.judge.limits import PlannerBounds
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp import ipopt
 from spm_opt.planners.ocp.constraints import UNLIMITED
@@ -53,8 +53,8 @@ from spm_opt.planners.ocp.path_nlp import (
 from spm_opt.planners.ocp.path_solver import FATROP, IPOPT, MONOTONE_IPOPT, assembled_nlp, solver
 from spm_opt.planners.ocp.refinement import REFINEMENTS, tightened
 from spm_opt.planners.ocp.settings import OcpSettings
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 PATH_SAMPLES = 200
 """Inverse-kinematics samples per segment through which q₀(s) runs."""
@@ -217,14 +217,19 @@ its multipliers: the start of a similar problem's solve (``warm_start``)."""
 def plan_in_path_coordinates(
     problem: Problem,
     settings: OcpSettings,
+    bounds: PlannerBounds,
     name: str,
     warm_start: Trajectory | None = None,
 ) -> Trajectory:
-    """The plan of ``settings``' objective and timing, clean under the evaluator, or a
-    :class:`PlanningError` naming what IPOPT or the evaluator found. ``warm_start``, a plan
-    of an NLP of the same shape, is continued from its solution and multipliers."""
+    """The plan of ``settings``' objective and timing within ``bounds`` (the problem's, at
+    the settings' margin), clean under the evaluator, or a :class:`PlanningError` naming
+    what IPOPT or the evaluator found. ``warm_start``, a plan of an NLP of the same shape,
+    is continued from its solution and multipliers.
+
+    The evaluator decides each round: a clean plan is returned (its report kept with it by
+    :func:`spm_opt.judge.evaluate.evaluate`, so whoever asked judges it without measuring it
+    again), a broken one solved again with the bounds it broke tightened."""
     started = time.perf_counter()
-    bounds = planner_bounds(problem, settings.margin)
     limits = _limits(problem, bounds)
     paths = segment_paths(
         problem,
@@ -271,7 +276,7 @@ def plan_in_path_coordinates(
         statistics["start"] = "solution" if continued else "speed limits"
         x = solution["x"].full().ravel()
         trajectory = _trajectory(problem, paths, layout, x, statistics)
-        broken = evaluate(problem, trajectory).violations
+        broken = evaluate(problem, trajectory).violations  # decides: return or refine
         if not broken:
             SOLVED[trajectory] = (shape, ipopt.continuation(solution))
             return trajectory

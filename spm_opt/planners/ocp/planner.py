@@ -1,6 +1,11 @@
 """An optimal-control planner: checks what no solver can do, solves from its starts in
 turn, and solves again until the evaluator finds the plan clean
-(:mod:`~spm_opt.planners.ocp.refinement`)."""
+(:mod:`~spm_opt.planners.ocp.refinement`).
+
+The planner judges its own plans because the judgement decides what it does next: a clean
+plan is returned, a broken one solved again with check points moved and bounds tightened.
+The returned plan's report stays with it (:func:`spm_opt.judge.evaluate.evaluate` keeps each
+trajectory's report), so whoever asked judges it without measuring it again."""
 
 from __future__ import annotations
 
@@ -11,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from spm_opt.errors import PlanningError
-from spm_opt.evaluate import evaluate
-from spm_opt.limits import contour_tube, planner_bounds
+from spm_opt.base.errors import PlanningError
+from spm_opt.judge.evaluate import evaluate
+from spm_opt.judge.limits import PlannerBounds
 from spm_opt.model.joint_torque import range_key
 from spm_opt.model.params import MM
 from spm_opt.planners.ocp.constraints import ON_DEMAND
@@ -30,8 +35,8 @@ from spm_opt.planners.ocp.settings import OcpSettings
 from spm_opt.planners.ocp.solve import Solution, added, solve
 from spm_opt.planners.ocp.transcription import Grid, default_fractions
 from spm_opt.planners.ocp.warm_start import SOLVED, Solved
-from spm_opt.problem import Problem
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
@@ -57,13 +62,13 @@ class OcpPlanner:
         points exceed it. Both give the same optimum when it does not bind.
         """
         settings = self.settings(problem)
-        need = check_feasible_at_all(problem, settings.timing, settings.margin)
-        if in_path_coordinates(problem, settings):
-            return plan_in_path_coordinates(problem, settings, self.name, warm_start)
-        need = need / (1 - settings.margin)
+        plannable = check_feasible_at_all(problem, settings.timing, settings.margin)
+        bounds = plannable.bounds
+        if in_path_coordinates(settings, bounds):
+            return plan_in_path_coordinates(problem, settings, bounds, self.name, warm_start)
+        need = plannable.lower_bounds / (1 - settings.margin)
         grid = settings.grid(len(problem.segment_durations))
         with_torque = settings.energy_weight > 0.0
-        bounds = planner_bounds(problem, settings.margin)
         fractions = np.tile(
             default_fractions(settings.checks_per_interval)[:, None], grid.intervals
         )
@@ -115,7 +120,7 @@ class OcpPlanner:
             statistics["refinements"] = round_ - 1
             statistics["check_points_moved"] = moved_checks
             trajectory = self._trajectory(problem, grid, solution.x, statistics, settings)
-            broken = evaluate(problem, trajectory).violations
+            broken = evaluate(problem, trajectory).violations  # decides: return or refine
             if not broken:
                 SOLVED[trajectory] = Solved(shape, fractions, demanded, solution)
                 return trajectory
@@ -179,13 +184,14 @@ class OcpPlanner:
         return grid.trajectory(x, metadata)
 
 
-def in_path_coordinates(problem: Problem, settings: OcpSettings) -> bool:
+def in_path_coordinates(settings: OcpSettings, bounds: PlannerBounds) -> bool:
     """Whether ``settings`` plan in path coordinates: ``"path"``, or ``"auto"`` on a problem
-    with a contour tube (on the hardware run, which has none, the cut left the contour by
+    with a contour tube (``bounds``: the problem's, as the planner imposes them) (on the
+    hardware run, which has none, the cut left the contour by
     33 mm, far beyond what the offset's first-order model of the motion holds for, and
     minimum energy's ∫τᵀτ came out 0.128 N²·m²·s against 0.042 in the time domain)."""
     if settings.transcription == "auto":
-        return contour_tube(problem) is not None
+        return bounds.contour_tolerance is not None
     return settings.transcription == "path"
 
 

@@ -21,9 +21,9 @@ from functools import cache
 import casadi as ca
 import numpy as np
 
-from spm_opt.errors import PlanningError
-from spm_opt.evaluate import Violation
-from spm_opt.limits import RELATIVE_TOLERANCE, PlannerBounds
+from spm_opt.base.errors import PlanningError
+from spm_opt.judge.limits import RELATIVE_TOLERANCE, PlannerBounds
+from spm_opt.judge.report import Violation
 from spm_opt.model.joint_torque import joint_side_torque
 from spm_opt.planners.ocp.constraints import ON_DEMAND, keeping
 from spm_opt.planners.ocp.diagnostics import excess
@@ -37,7 +37,7 @@ from spm_opt.planners.ocp.transcription import (
     interval_function,
     row_groups,
 )
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 REFINEMENTS = 5
 """Re-solves, each with check points moved and tighter bounds for whatever the evaluator

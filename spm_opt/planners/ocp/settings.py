@@ -6,10 +6,10 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from spm_opt.errors import InputError
+from spm_opt.base.errors import InputError
 from spm_opt.planners.ocp.transcription import Grid
 from spm_opt.planners.registry import planner_options, settings_from_options
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 
 @dataclass(frozen=True)

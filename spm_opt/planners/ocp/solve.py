@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from spm_opt import interrupt
-from spm_opt.errors import PlanningError
-from spm_opt.limits import PlannerBounds
+from spm_opt.base import interrupt
+from spm_opt.base.errors import PlanningError
+from spm_opt.judge.limits import PlannerBounds
 from spm_opt.model.joint_torque import range_key
 from spm_opt.planners.ocp import ipopt
 from spm_opt.planners.ocp.bounds import nlp_bounds
@@ -20,7 +20,7 @@ from spm_opt.planners.ocp.diagnostics import worst_constraint
 from spm_opt.planners.ocp.nlp import build_nlp
 from spm_opt.planners.ocp.parameters import nlp_parameters
 from spm_opt.planners.ocp.settings import OcpSettings
-from spm_opt.problem import Problem
+from spm_opt.problem.problem import Problem
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ Each segment between consecutive landmark visits is three phases (a short one at
 the middle between them) of uniform intervals; the phase durations are variables. The
 state is (q, q̇, q̈) and the control is the jerk, constant on each interval, so the motion is
 integrated exactly: q is a cubic in time on each interval, and the returned
-:class:`~spm_opt.trajectory.Trajectory` reproduces the solution exactly. Landmarks are
+:class:`~spm_opt.problem.trajectory.Trajectory` reproduces the solution exactly. Landmarks are
 reached exactly at phase boundaries; the motion starts and ends at rest.
 """
 
@@ -19,7 +19,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from spm_opt.limits import PlannerBounds
+from spm_opt.judge.limits import PlannerBounds
 from spm_opt.planners.ocp.constraints import LIMITS, Constraint, Limit
 from spm_opt.planners.ocp.point import (
     ARC_PARAMETERS,
@@ -30,7 +30,7 @@ from spm_opt.planners.ocp.point import (
     SPEED_CONTROL,
     Point,
 )
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.trajectory import Trajectory
 
 CORNER_SHARE = 0.05
 """Share of a segment's duration each corner phase takes in a contour-following guess."""

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from spm_opt.planners.ocp.solve import Solution
-from spm_opt.trajectory import Trajectory
+from spm_opt.problem.trajectory import Trajectory
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,417 @@
+"""The commands' handlers, by name: each imports the library it needs only when it runs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from spm_opt.base.errors import InputError
+from spm_opt.base.output_paths import check_output_directory, check_output_file
+from spm_opt.cli.parser import PLAN_MAX_RATE_HZ
+
+if TYPE_CHECKING:
+    from spm_opt.execution import ExecutionResult
+    from spm_opt.judge.report import Report
+
+_LOG = logging.getLogger("spm_opt.cli")  # the command line's logger, whichever module logs
+
+
+def _pair(text: str, option: str, kind: type) -> tuple:
+    import numpy as np
+
+    parts = text.split(",")
+    try:
+        values = tuple(kind(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 2 or not all(np.isfinite(values)):
+        raise InputError(f"{option} {text!r}: expected two {kind.__name__} values like 1,2")
+    return values
+
+
+def _execute(args: argparse.Namespace) -> None:
+    import numpy as np
+
+    from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+    from spm_opt.execution.console import console
+    from spm_opt.model.params import load_robot
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.problem.trajectory import Trajectory
+
+    try:
+        settings = ExecutionSettings(
+            rate_hz=args.rate,
+            approach=args.approach,
+            feed=args.feed,
+            max_feed=max(ExecutionSettings.max_feed, args.feed),
+            max_hold_s=args.max_hold,
+            other_problem=args.other_problem,
+            tracking=args.tracking,
+        )
+    except InputError as error:  # name the option the user gave, not the setting
+        setting = str(error).split(" = ")[0]
+        raise InputError(f"{_SETTING_OPTIONS.get(setting, setting)}: {error}") from None
+    if args.trace is not None and (args.backend != "sim" or args.trace.suffix != ".npz"):
+        raise InputError(
+            f"--trace {args.trace}: expected a file name ending in .npz, with --backend sim "
+            "(the emulator's own --trace records the plant behind the Dynamixel backend)"
+        )
+    check_output_file(args.log, "--log")
+    if args.trace is not None:
+        check_output_file(args.trace, "--trace")
+    problem = load_problem(args.problem)
+    trajectory = Trajectory.from_csv(args.plan)
+    keys = _keys_terminal(args.interactive)
+    if args.backend == "sim":
+        start = trajectory.position(trajectory.start_time)
+        if args.start_deg is not None:
+            start = np.radians(_pair(args.start_deg, "--start-deg", float))
+        plant = None if args.plant_robot is None else load_robot(args.plant_robot)
+        realtime = args.realtime or keys is not None  # keys need the wall clock
+        backend = SimulatedRobot(
+            problem.robot, start_rad=start, realtime=realtime, plant_robot=plant
+        )
+    else:
+        from spm_opt.execution.dynamixel import DynamixelRobot
+
+        if args.plant_robot is not None:
+            raise InputError("--plant-robot: only with --backend sim (the real robot is the plant)")
+
+        if args.port is None:
+            raise InputError("--port: required with --backend dynamixel (e.g. /dev/ttyUSB0)")
+        ids = _pair(args.ids, "--ids", int)
+        backend = DynamixelRobot(problem.robot.actuator, args.port, args.baud, ids)
+    executor = Executor(problem, backend, settings)
+    with console(executor, problem, trajectory, sys.stderr, keys):
+        result = executor.run(trajectory, args.log)
+    if args.trace is not None:
+        backend.trace.save(args.trace)
+    loop = result.statistics
+    print(
+        f"{args.log}: {result.samples} samples, {loop.achieved_rate_hz:.1f} Hz achieved, "
+        f"period error p99 {loop.period_error_p99_ms:.3f} ms, {loop.overruns} overruns"
+    )
+    if not result.succeeded:
+        raise GateFailed(_outcome(result))
+
+
+_SETTING_OPTIONS = {
+    "rate_hz": "--rate",
+    "feed": "--feed",
+    "max_feed": "--feed",
+    "max_hold_s": "--max-hold",
+    "tracking": "--tracking",
+}
+"""The execute option that sets each :class:`~spm_opt.execution.ExecutionSettings` field."""
+
+
+def _outcome(result: ExecutionResult) -> str:
+    """A run that did not succeed, in one line: why, after a safe stop how far each joint
+    travelled after the fault and when rest was proven, and what a failed log kept."""
+    log, kept = result.log, ""
+    if log is not None and log.fault:
+        failed = "" if log.fault in result.reason else f"log failed: {log.fault}; "
+        kept = f"; {failed}{log.summary()}"
+    if result.stop is None:
+        return result.reason + kept
+    stop = result.stop
+    line = f"safe stop: {result.reason}"
+    if stop.travel_deg is not None:
+        line += "; travel after the fault " + ", ".join(
+            f"theta{j + 1} {travel:.2f} deg" for j, travel in enumerate(stop.travel_deg)
+        )
+    if stop.duration_s is not None:
+        return f"{line}; at rest {stop.duration_s:.2f} s after it{kept}"
+    return f"{line}; rest {stop.rest}{kept}"
+
+
+def _keys_terminal(interactive: bool) -> int | None:
+    """The terminal the keys are read from: stdin's, with --interactive, if it is one."""
+    if not interactive:
+        return None
+    if not sys.stdin.isatty():
+        _LOG.warning("--interactive: stdin is not a terminal, so the keys are off")
+        return None
+    return sys.stdin.fileno()
+
+
+class GateFailed(Exception):
+    """The command did its work, but the result fails what a script would gate on: a plan
+    or run that breaks a limit, a planner that failed, a run that ended in a safe stop or
+    without rest proven. The command exits with status 1."""
+
+
+def _emulate(args: argparse.Namespace) -> None:
+    import numpy as np
+
+    from spm_opt.execution.emulator import parse_faults, serve
+    from spm_opt.model.params import load_robot
+    from spm_opt.problem.problem import load_problem
+
+    if args.plant_robot is not None:
+        robot = load_robot(args.plant_robot)
+    else:
+        robot = load_problem(args.problem).robot
+    ids = _pair(args.ids, "--ids", int)
+    start = np.radians(_pair(args.start_deg, "--start-deg", float))
+    faults = parse_faults(args.fault)
+    if args.trace is not None:
+        check_output_file(args.trace, "--trace")
+    serve(
+        robot,
+        ids,
+        start,
+        faults,
+        args.seed,
+        announce=lambda device: print(device, flush=True),
+        trace_path=args.trace,
+    )
+
+
+def _sweep(args: argparse.Namespace) -> None:
+    from spm_opt.studies.sweep.results import write_sweep_report
+    from spm_opt.studies.sweep.runner import run_sweep
+    from spm_opt.studies.sweep.spec import load_sweep_spec
+
+    check_output_directory(args.out, "--out")
+    spec = load_sweep_spec(args.spec, max_tasks=args.max_tasks)
+    tasks = spec.tasks()
+    summary = run_sweep(
+        tasks,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        retry_failed=args.retry_failed,
+    )
+    print(
+        f"{spec.name}: {summary.total} tasks, {summary.skipped} already done, "
+        f"{summary.done + summary.failed} run ({summary.retried} again, {summary.failed} "
+        f"failed) in {summary.seconds:.1f} s",
+        file=sys.stderr,
+    )
+    keys = [task.key for task in tasks]
+    for path in write_sweep_report(args.out, title=spec.description or spec.name, keys=keys):
+        print(path)
+
+
+def _reproduce(args: argparse.Namespace) -> None:
+    from spm_opt.studies.reproduce import reproduce
+
+    if not args.problem.exists():
+        raise InputError(
+            f"--problem {args.problem}: no such file (run from the repository's root, or "
+            "pass --problem with the path of craniotomy_bone_flap.toml)"
+        )
+    check_output_directory(args.out, "--out")
+    for path in reproduce(args.problem, args.out):
+        print(path)
+
+
+def _plan(args: argparse.Namespace) -> None:
+    from spm_opt.planners import get_planner, plan
+    from spm_opt.problem.problem import load_problem
+
+    if args.out.suffix != ".csv":
+        raise InputError(f"--out {args.out}: expected a file name ending in .csv")
+    if args.rate is not None and not 0.0 < args.rate <= PLAN_MAX_RATE_HZ:
+        raise InputError(
+            f"--rate {args.rate}: expected a rate in Hz with 0 < rate <= {PLAN_MAX_RATE_HZ:g}"
+        )
+    check_output_file(args.out, "--out")
+    get_planner(args.planner)
+    problem = load_problem(args.problem)
+    trajectory = plan(problem, args.planner)
+    trajectory.to_csv(args.out, rate_hz=args.rate)
+    print(f"{args.out}: {args.planner} plan, {trajectory.duration:.3f} s")
+
+
+def _evaluate(args: argparse.Namespace) -> None:
+    from spm_opt.judge.evaluate import evaluate
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.verify.executed_cut import evaluate_log, is_execution_log
+
+    problem = load_problem(args.problem)
+    if is_execution_log(args.trajectory):
+        reports = evaluate_log(
+            problem, args.trajectory, args.trace, other_problem=args.other_problem
+        )
+        judged = {"measured": reports.measured, "true": reports.true}
+    else:
+        if args.trace:
+            raise InputError("--trace: only with an execution log, not a trajectory CSV")
+        judged = {"planned": evaluate(problem, args.trajectory, other_problem=args.other_problem)}
+    judged = {name: report for name, report in judged.items() if report is not None}
+    if len(judged) == 1:
+        (report,) = judged.values()
+        print(json.dumps(report.to_dict(), indent=2) if args.json else report.to_markdown(), end="")
+    elif args.json:
+        print(json.dumps({name: report.to_dict() for name, report in judged.items()}, indent=2))
+    else:
+        cuts = [f"## The {name} cut\n\n{report.to_markdown()}" for name, report in judged.items()]
+        print("\n".join(cuts), end="")
+    faults = [_faults(name, report) for name, report in judged.items()]
+    if any(faults):
+        raise GateFailed("; ".join(fault for fault in faults if fault))
+
+
+def _faults(name: str, report: Report) -> str:
+    """What fails the gate in one judged cut, in words, or "" if nothing does."""
+    rules = sorted({violation.rule for violation in report.violations})
+    parts = [f"{len(report.violations)} violations ({', '.join(rules)})"] if rules else []
+    if not getattr(report, "completed", True):
+        parts.append("the run did not complete")
+    return f"the {name} cut: {' and '.join(parts)}" if parts else ""
+
+
+def _review(args: argparse.Namespace) -> None:
+    from spm_opt.base.files import write_atomically
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.report.review_inputs import review_inputs
+    from spm_opt.report.review_page import review_page
+    from spm_opt.report.review_png import review_png
+    from spm_opt.skull.surface import Skull
+
+    check_output_directory(args.out, "--out")
+    problem = load_problem(args.problem)
+    given = review_inputs(problem, args.plan, args.log, args.other_problem, args.trace)
+    skull = problem.skull if problem.skull is not None else Skull(surface=problem.surface)
+    files = {
+        args.out / "review.html": review_page(problem, skull, given),
+        args.out / "review.png": review_png(problem, skull, given),
+    }
+    write_atomically(files)
+    for path in files:
+        print(path)
+
+
+def _identify(args: argparse.Namespace) -> None:
+    from spm_opt.base.files import write_atomically
+    from spm_opt.identify.estimate import identify
+    from spm_opt.identify.loop import estimate_loops, goal_rms
+    from spm_opt.identify.report import prediction_figure, report_markdown
+    from spm_opt.identify.robot_file import robot_file_text
+    from spm_opt.identify.samples import log_samples
+    from spm_opt.identify.validate import prediction_rms
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.report.plots import to_png
+
+    if args.out.suffix != ".toml":
+        raise InputError(f"--out {args.out}: expected a robot file name ending in .toml")
+    check_output_file(args.out, "--out")
+    problem = load_problem(args.problem)
+    settings = (args.cutoff_hz, args.decimation, args.min_speed)
+    samples = log_samples(args.logs, *settings)
+    validation = samples if args.validate is None else log_samples([args.validate], *settings)
+    _LOG.info("identify: %d samples from %d logs; fitting", len(samples.q), len(args.logs))
+    identification = identify(problem.robot, samples)
+    loops = estimate_loops(args.logs, problem.robot)
+    on = "the fitted logs" if args.validate is None else f"{args.validate.name} (not fitted)"
+    prior = prediction_rms(problem.robot, validation)
+    identified = prediction_rms(identification.robot, validation)
+    figure = prediction_figure(problem.robot, identification.robot, validation)
+    goal_logs = args.logs if args.validate is None else [args.validate]
+    goals = [goal_rms(goal_logs, robot) for robot in (problem.robot, loops.robot(problem.robot))]
+    actuator = problem.robot.actuator
+    unit = actuator.current_unit_a  # one Present Current unit, A
+    report = report_markdown(
+        identification, prior, identified, on, float(actuator.current_map.torque(unit))
+    )
+    files = {
+        args.out: robot_file_text(identification, loops, args.out.stem),
+        args.out.with_suffix(".md"): "\n".join([report, *loops.markdown(*goals, on), ""]),
+        args.out.with_suffix(".png"): to_png(figure),
+    }
+    write_atomically(files)
+    for path in files:
+        print(path)
+    print(
+        f"torque prediction RMS on {on}: prior {prior[0]:.4f}, {prior[1]:.4f} N·m; "
+        f"identified {identified[0]:.4f}, {identified[1]:.4f} N·m",
+        file=sys.stderr,
+    )
+    print(
+        f"actuator loops: position_loop_gain_per_s {loops.gain_per_s[0]:.4g}, "
+        f"{loops.gain_per_s[1]:.4g}; velocity_loop_bandwidth_per_s "
+        f"{loops.bandwidth_per_s[0]:.4g}, {loops.bandwidth_per_s[1]:.4g} (1/s)",
+        file=sys.stderr,
+    )
+
+
+def _compare(args: argparse.Namespace) -> None:
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.studies.comparison import progress_line, run_planners, write_comparison
+
+    names = None
+    if args.planners is not None:
+        names = [name.strip() for name in args.planners.split(",") if name.strip()]
+        if not names:
+            raise InputError(f"--planners {args.planners!r}: expected comma-separated names")
+    check_output_directory(args.out, "--out")
+    problem = load_problem(args.problem)
+    outcomes = run_planners(
+        problem, names, lambda *call: print(progress_line(*call), file=sys.stderr, flush=True)
+    )
+    for path in write_comparison(problem, outcomes, args.out):
+        print(path)
+    failed = [outcome.planner for outcome in outcomes if outcome.error is not None]
+    if failed:
+        raise GateFailed(f"{len(failed)} of {len(outcomes)} planners failed: {', '.join(failed)}")
+
+
+def _cache(args: argparse.Namespace) -> None:
+    from spm_opt.model import library_cache
+
+    directory = library_cache.cache_directory()
+    if directory.exists() and not directory.is_dir():
+        raise InputError(f"{library_cache.CACHE_ENV} = {directory}: not a folder")
+    if args.action == "clear":
+        removed = library_cache.clear()
+        size = sum(entry.size for entry in removed) / 1e6
+        print(f"{directory}: entries removed: {len(removed)}, {size:.2f} MB")
+        return
+    bound = library_cache.size_bound() / 1e6
+    listed = library_cache.entries()
+    size = sum(entry.size for entry in listed) / 1e6
+    print(f"folder   {directory}")
+    print(f"entries  {len(listed)}, {size:.2f} MB; builds in progress: {library_cache.builds()}")
+    print(f"bound    {bound:g} MB (${library_cache.SIZE_ENV}); least recently used go first")
+    width = max((len(entry.name) for entry in listed), default=0)
+    for entry in reversed(listed):
+        used = time.strftime("%Y-%m-%d %H:%M", time.localtime(entry.used))
+        print(f"  {entry.name:<{width}}  {entry.size / 1e6:8.2f} MB  used {used}")
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], None]] = {
+    "reproduce": _reproduce,
+    "plan": _plan,
+    "compare": _compare,
+    "evaluate": _evaluate,
+    "identify": _identify,
+    "review": _review,
+    "execute": _execute,
+    "emulate": _emulate,
+    "sweep": _sweep,
+    "cache": _cache,
+}
+"""Each command's handler, by the command's name."""
+
+
+def optional_modules(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """The optional modules the command needs, each with what needs it; imported before the
+    command starts, so a missing one leaves nothing half-written."""
+    if args.command == "sweep":
+        needed = [("tqdm", "the sweep"), ("pyarrow", "the sweep's results.parquet")]
+        if args.scheduler is not None:
+            needed.append(("distributed", f"--scheduler {args.scheduler}"))
+        return needed
+    if args.command == "reproduce":
+        return [("mujoco", "reproduce (Table IV's MuJoCo check)")]
+    if args.command == "execute" and args.backend == "dynamixel":
+        # pyserial first: dynamixel-sdk imports it, and would be blamed for its absence
+        return [("serial", "--backend dynamixel"), ("dynamixel_sdk", "--backend dynamixel")]
+    return []

@@ -1,0 +1,447 @@
+"""The command line's argument parser: its commands, options and help.
+
+Light to build: it imports none of the library but :mod:`spm_opt.base`'s names and version.
+"""
+
+from __future__ import annotations
+
+import argparse
+import textwrap
+from pathlib import Path
+from typing import NoReturn
+
+from spm_opt.base.choices import (
+    CONTOUR_PLANNER_NAMES,
+    DEFAULT_MAX_TASKS,
+    PLANNER_NAMES,
+    TRACKING_MODES,
+)
+from spm_opt.base.version import package_version
+
+PAPER_PROBLEM = "problems/craniotomy_bone_flap.toml"
+_VERBOSE = "show the library's info lines on stderr (-vv: debug lines too)"
+
+EXIT_STATUSES = {
+    0: "success",
+    1: "the plan or run breaks a limit (evaluate), a planner failed (plan, compare), or the "
+    "run ended in a safe stop (execute)",
+    2: "bad input: one line 'spm-opt: error: ...' names the field and what is allowed "
+    "(a missing optional package too); nothing is written",
+    130: "interrupted by Ctrl-C (SIGINT): one line, and nothing is written (unless the "
+    "command had written its output and waited for a background compile: the line says so)",
+}
+"""Every exit status of ``spm-opt`` and what it means."""
+
+_DESCRIPTION = """\
+Plan, judge and execute trajectories for the spherical parallel manipulator for
+brain surgery. 'spm-opt COMMAND --help' describes each command."""
+
+
+def _epilog() -> str:
+    lines = [
+        textwrap.fill(meaning, 78, initial_indent=f"  {status:<5}", subsequent_indent=" " * 7)
+        for status, meaning in EXIT_STATUSES.items()
+    ]
+    return "exit statuses:\n" + "\n".join(lines)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage mistake is one line and status 2 like every other error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"spm-opt: error: {message} (see {self.prog} --help)\n")
+
+
+PLAN_MAX_RATE_HZ = 1e5
+"""The highest plan --rate, Hz: how densely the CSV may sample the plan."""
+_NOT_COMPARED = tuple(name for name in PLANNER_NAMES if name not in CONTOUR_PLANNER_NAMES)
+"""The planners compare leaves out unless named: their plans cut no contour."""
+
+
+def _command(
+    commands: argparse._SubParsersAction, name: str, summary: str, details: str
+) -> argparse.ArgumentParser:
+    """A sub-command whose ``summary`` (a phrase) is its line in ``spm-opt --help`` and,
+    followed by ``details``, the description atop ``spm-opt NAME --help``."""
+    return commands.add_parser(
+        name, help=summary, description=f"{summary[0].upper()}{summary[1:]}. {details}"
+    )
+
+
+# The options several commands take, each written once; the help is each command's own.
+
+
+def _verbose(parser: argparse.ArgumentParser, default: object) -> None:
+    parser.add_argument("-v", "--verbose", action="count", default=default, help=_VERBOSE)
+
+
+def _problem_file(command: argparse.ArgumentParser) -> None:
+    command.add_argument("problem", type=Path, help="problem TOML file")
+
+
+def _plan_file(command: argparse.ArgumentParser) -> None:
+    command.add_argument("plan", type=Path, help="trajectory CSV file (spm-opt plan --out)")
+
+
+def _problem_option(command: argparse.ArgumentParser, text: str, *, paper: bool) -> None:
+    """``--problem``: the paper's by default (said in the help), or required."""
+    if paper:
+        command.add_argument(
+            "--problem", default=PAPER_PROBLEM, type=Path, help=f"{text} (default: {PAPER_PROBLEM})"
+        )
+    else:
+        command.add_argument("--problem", required=True, type=Path, help=text)
+
+
+def _out(command: argparse.ArgumentParser, text: str) -> None:
+    command.add_argument("--out", required=True, type=Path, help=text)
+
+
+def _rate(command: argparse.ArgumentParser, default: float | None, text: str) -> None:
+    command.add_argument("--rate", type=float, default=default, metavar="HZ", help=text)
+
+
+def _other_problem(command: argparse.ArgumentParser, text: str) -> None:
+    command.add_argument("--other-problem", action="store_true", help=text)
+
+
+def _plant_robot(command: argparse.ArgumentParser, text: str) -> None:
+    command.add_argument("--plant-robot", type=Path, metavar="FILE", help=text)
+
+
+def _trace(command: argparse.ArgumentParser, text: str) -> None:
+    command.add_argument("--trace", type=Path, metavar="FILE", help=text)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's parser; light to build: it imports none of the library."""
+    parser = _Parser(
+        prog="spm-opt",
+        description=_DESCRIPTION,
+        epilog=_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"spm-opt {package_version()}")
+    _verbose(parser, 0)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    reproduce = _command(
+        commands,
+        "reproduce",
+        "reproduce the paper with its cubic baseline: Tables III and IV, Figs. 8, 13 and 14",
+        "Writes each table as markdown and CSV, each figure as PNG, the baseline's "
+        "evaluation report (markdown and JSON) and its trajectory CSV; Table III is compared "
+        "value by value with the printed one.",
+    )
+    _out(reproduce, "directory for the tables and figures (made if missing)")
+    _problem_option(reproduce, "the paper's problem file", paper=True)
+
+    plan = _command(
+        commands,
+        "plan",
+        "plan a problem with one planner and write the trajectory CSV and its sidecar",
+        "The CSV samples the plan at --rate; the JSON sidecar beside it records the "
+        "planner, the problem and the planner's statistics. Exits 1 if the planner fails.",
+    )
+    _problem_file(plan)
+    plan.add_argument(
+        "--planner",
+        default="cubic",
+        metavar="NAME",
+        help=f"one of {', '.join(PLANNER_NAMES)} (default: cubic)",
+    )
+    _out(plan, "trajectory CSV to write; its sidecar (.json) goes beside it")
+    _rate(
+        plan,
+        None,
+        f"how densely the CSV samples the plan, Hz, 0 < HZ <= {PLAN_MAX_RATE_HZ:g} "
+        "(default 100, breakpoints included); not the control loop's rate: execute "
+        "interpolates the CSV at its own --rate",
+    )
+
+    compare = _command(
+        commands,
+        "compare",
+        f"plan a problem with every planner but {', '.join(_NOT_COMPARED)} and compare them: "
+        "a table and figures",
+        f"Each plan is judged by the problem's limits; {', '.join(_NOT_COMPARED)} plans no "
+        "cut (a motion for identify) and runs only when --planners names it. Exits 1 if a "
+        "planner fails; the others' table and figures are written all the same.",
+    )
+    _problem_file(compare)
+    compare.add_argument(
+        "--planners",
+        default=None,
+        metavar="NAMES",
+        help="comma-separated planner names, any that plan --planner takes (default: every "
+        f"one but {', '.join(_NOT_COMPARED)})",
+    )
+    _out(compare, "directory for the table and figures (made if missing)")
+
+    review = _command(
+        commands,
+        "review",
+        "show a plan (and its run) in 3-D on the skull with the robot, beside the judge's "
+        "verdicts: review.html and review.png",
+        "Each cut is judged as spm-opt evaluate judges it, in its own tube (the plan's: the "
+        "contour tolerance less the execution reserve; the executed cut's: the whole), and "
+        "each violation is listed and marked on the cut.",
+    )
+    _problem_file(review)
+    _plan_file(review)
+    review.add_argument(
+        "--log",
+        type=Path,
+        default=None,
+        help="execution log CSV (spm-opt execute --log) whose measured cut is drawn and "
+        "judged too, as spm-opt evaluate judges it (default: only the plan)",
+    )
+    _trace(
+        review,
+        "the plant's true state over the logged run (spm-opt execute --trace; only with "
+        "--log): its true cut is judged too (default: not judged)",
+    )
+    _other_problem(
+        review,
+        "draw a plan or a log made for another problem (or recording none) under PROBLEM "
+        "(default: refused)",
+    )
+    _out(review, "directory for review.html and review.png (made if missing)")
+
+    _execute_parser(commands)
+    _emulate_parser(commands)
+
+    sweep = _command(
+        commands,
+        "sweep",
+        "run a parameter sweep, resumable, on a process pool or a Dask cluster",
+        "Plans every task of the specification (its grid, random samples and flaps, each "
+        "with each of its planners) and writes each task's result, a table, a summary and "
+        "figures to --out; a second run there resumes, skipping the tasks done (see "
+        "--retry-failed).",
+    )
+    sweep.add_argument("spec", type=Path, help="sweep specification TOML (problems/sweeps/)")
+    _out(sweep, "directory for the results (made if missing; a second run resumes there)")
+    sweep.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    sweep.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler tcp://host:port, or 'local' for a Dask cluster on this machine "
+        "(default: a process pool of --workers)",
+    )
+    sweep.add_argument(
+        "--max-tasks",
+        type=int,
+        default=DEFAULT_MAX_TASKS,
+        metavar="N",
+        help=f"refuse a sweep of more tasks than this (default {DEFAULT_MAX_TASKS:,})",
+    )
+    sweep.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="run every failed task again (default: only those that failed for the machine's "
+        "reasons: a worker killed, a lost connection, a timeout)",
+    )
+
+    identify = _command(
+        commands,
+        "identify",
+        "identify the robot's parameters and its actuators' loops from execution logs",
+        "Fits them to the logs with the problem's robot as the prior, and writes the "
+        "identified robot file (TOML) with its report (.md) and a figure of the torques "
+        "predicted (.png) beside it.",
+    )
+    identify.add_argument("logs", nargs="+", type=Path, help="execution log CSV files")
+    _problem_option(identify, "problem TOML whose robot is the prior", paper=False)
+    _out(identify, "robot TOML to write (.md and .png beside it)")
+    identify.add_argument(
+        "--validate",
+        type=Path,
+        metavar="LOG",
+        help="judge the fit on this log, not used for it (default: on the fitted logs)",
+    )
+    identify.add_argument(
+        "--cutoff-hz",
+        type=float,
+        default=2.0,
+        metavar="HZ",
+        help="cutoff of the zero-phase low-pass filter, Hz (default 2)",
+    )
+    identify.add_argument(
+        "--decimation",
+        type=int,
+        default=None,
+        metavar="N",
+        help="keep one sample in N (default: 5 samples a cutoff period)",
+    )
+    identify.add_argument(
+        "--min-speed",
+        type=float,
+        default=0.02,
+        metavar="RAD_S",
+        help="samples slower than this are left out, rad/s (default 0.02)",
+    )
+
+    evaluate = _command(
+        commands,
+        "evaluate",
+        "judge a trajectory CSV, or the run an execution log records, by a problem's limits",
+        "Prints the report (markdown, or JSON with --json); exits 1 if the plan or the run "
+        "breaks a limit.",
+    )
+    _problem_file(evaluate)
+    evaluate.add_argument(
+        "trajectory", type=Path, help="trajectory CSV file, or execution log CSV (spm-opt execute)"
+    )
+    evaluate.add_argument(
+        "--json", action="store_true", help="print the report as JSON (default: markdown)"
+    )
+    _trace(
+        evaluate,
+        "the plant's true state over the logged run (.npz, from spm-opt execute --backend "
+        "sim --trace or spm-opt emulate --trace): the true cut is judged too (default: only the "
+        "logged one)",
+    )
+    _other_problem(
+        evaluate,
+        "judge a plan or a log under PROBLEM though it was made for (ran under) another, "
+        "or records none (default: refused)",
+    )
+    cache = _command(
+        commands,
+        "cache",
+        "show what the cache of compiled libraries holds, or clear it",
+        "The dynamics and the optimal-control planners compile their functions to C once "
+        "per machine and keep them there.",
+    )
+    cache.add_argument(
+        "action",
+        choices=("info", "clear"),
+        help="info: its folder, entries, total size and size bound; clear: remove every "
+        "entry but the builds in progress",
+    )
+    for command in commands.choices.values():
+        _verbose(command, argparse.SUPPRESS)  # -v after the command too; keeps one given before
+    return parser
+
+
+def _execute_parser(commands: argparse._SubParsersAction) -> None:
+    execute = _command(
+        commands,
+        "execute",
+        "run a trajectory CSV on the simulated robot or the Dynamixel actuators, and log it",
+        "Checks the plan against --problem's limits first, then follows it in a control "
+        "loop at --rate and writes the execution log (CSV); exits 1 if the run ends in a "
+        "safe stop.",
+    )
+    _plan_file(execute)
+    _problem_option(execute, "problem TOML whose robot and limits apply", paper=False)
+    execute.add_argument(
+        "--backend",
+        required=True,
+        choices=("sim", "dynamixel"),
+        help="sim: the simulated robot; dynamixel: the actuators on --port",
+    )
+    execute.add_argument("--log", required=True, type=Path, help="CSV log to write")
+    execute.add_argument(
+        "--port", help="serial device of the actuators, e.g. /dev/ttyUSB0 (dynamixel: required)"
+    )
+    execute.add_argument(
+        "--baud", type=int, default=1_000_000, help="baud rate (dynamixel; default 1000000)"
+    )
+    execute.add_argument(
+        "--ids", default="1,2", help="actuator ids of theta1,theta2 (dynamixel; default 1,2)"
+    )
+    _plant_robot(
+        execute, "sim: robot TOML the simulated robot integrates (default: the problem's robot)"
+    )
+    _rate(
+        execute,
+        100.0,
+        "the control loop's rate, Hz, 1 <= HZ <= 2000 (default 100): each cycle reads "
+        "and writes both actuators over their serial bus (sim: the same loop); not the plan "
+        "CSV's sampling rate (plan --rate): the loop interpolates the plan between its "
+        "samples",
+    )
+    execute.add_argument(
+        "--approach",
+        action="store_true",
+        help="first move to the plan's start if away from it (default: refuse to start away)",
+    )
+    _other_problem(
+        execute,
+        "run a plan made for another problem (or with no sidecar) under --problem's limits "
+        "(default: refused)",
+    )
+    execute.add_argument(
+        "--tracking",
+        choices=TRACKING_MODES,
+        default="lead",
+        help="lead: each goal leads the plan by the position loop's lag (the robot file's "
+        "loop parameters); none: the goal is the plan (default lead)",
+    )
+    execute.add_argument(
+        "--realtime", action="store_true", help="sim: run on the wall clock (default: fast)"
+    )
+    _trace(
+        execute,
+        "sim: save the plant's true state here (.npz; spm-opt evaluate --trace reads it; "
+        "default: not saved)",
+    )
+    execute.add_argument(
+        "--start-deg",
+        default=None,
+        metavar="A,B",
+        help="sim: where the simulated robot rests at the start, deg (default: the plan's start)",
+    )
+    execute.add_argument(
+        "--feed",
+        type=float,
+        default=1.0,
+        metavar="F",
+        help="start at this fraction of the planned pace, 0.1 to 4 (default 1)",
+    )
+    execute.add_argument(
+        "--max-hold",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="a feed hold longer than this ends in the safe stop (s, default 600)",
+    )
+    execute.add_argument(
+        "--interactive",
+        action="store_true",
+        help="steer from the terminal: space hold/resume, + and - feed 10%%, q stop "
+        "(sim: runs on the wall clock; default: no keys)",
+    )
+
+
+def _emulate_parser(commands: argparse._SubParsersAction) -> None:
+    emulate = _command(
+        commands,
+        "emulate",
+        "serve two emulated L54 actuators (Protocol 2.0) on a pseudo-terminal",
+        "Prints the pseudo-terminal's path, for execute --backend dynamixel --port, and "
+        "serves until Ctrl-C or SIGTERM; the actuators drive a simulated robot.",
+    )
+    _problem_option(emulate, "problem TOML whose robot is emulated", paper=True)
+    _plant_robot(emulate, "robot TOML the emulated actuators drive (default: the problem's robot)")
+    emulate.add_argument("--ids", default="1,2", help="actuator ids (default 1,2)")
+    emulate.add_argument(
+        "--start-deg", default="0,0", metavar="A,B", help="start angles, deg (default 0,0)"
+    )
+    emulate.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        help="inject a fault (drop, crc, delay, overload, stuck, write), e.g. overload:id=1,at=3 "
+        "(repeatable; default none)",
+    )
+    emulate.add_argument(
+        "--seed", type=int, default=0, help="seed of the current noise (default 0)"
+    )
+    _trace(
+        emulate,
+        "save the plant's true state here (.npz) when serving ends (default: not saved)",
+    )

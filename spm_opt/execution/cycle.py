@@ -1,0 +1,337 @@
+"""One control cycle's I/O and checks: wait for the deadline, read both actuators, judge
+the reading, write the goal, count the failures and log the sample.
+
+:class:`ControlLoop` does each step and returns what it found (the reading, a failed
+transaction, a fault's reason); the phases of a run (:mod:`spm_opt.execution.executor`,
+:mod:`spm_opt.execution.stop`, :mod:`spm_opt.execution.rest`) decide what follows, and raise
+:class:`Fault` to end the run in the safe stop.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from spm_opt.base.errors import CommunicationError
+from spm_opt.execution.backend import Backend, Clock, Measurement, hardware_error_names
+from spm_opt.execution.feed import FeedRequests, Pace
+from spm_opt.execution.log import LogWriter
+from spm_opt.execution.results import RunStatus
+from spm_opt.execution.settings import ExecutionSettings
+from spm_opt.execution.tracking import Lead, following_error_limit
+from spm_opt.model.params import DEG
+from spm_opt.problem.problem import Problem
+
+_LOG = logging.getLogger(__name__)
+
+
+class Ticker:
+    """The loop's schedule: deadlines every period on the backend's clock, from ``origin``
+    (its time now, s); a late cycle skips the deadlines it missed rather than running them
+    in a burst. Times it gives are since ``origin`` (the log's clock)."""
+
+    def __init__(self, clock: Clock, period: float) -> None:
+        self.clock, self.period = clock, period
+        self.origin = clock.now()
+        self.ticks: list[float] = []
+        self._next = self.origin
+
+    def wait(self) -> float:
+        """Sleep until the next deadline; returns the time the cycle starts, s."""
+        self.clock.sleep_until(self._next)
+        now = self.clock.now()
+        self.ticks.append(now - self.origin)
+        missed = math.floor((now - self._next) / self.period)
+        self._next += (max(missed, 0) + 1) * self.period
+        return now - self.origin
+
+    def now(self) -> float:
+        """The time since ``origin``, s."""
+        return self.clock.now() - self.origin
+
+
+@dataclass
+class Cycle:
+    """One control cycle: when it began (s, the time its goal is sampled at), what it
+    read and what went wrong (``notes``; ``unexpected``: the backend raised something
+    other than :class:`CommunicationError`, a fault at once)."""
+
+    time_s: float
+    measurement: Measurement | None = None
+    following_error: np.ndarray | None = None
+    read_failed: bool = False
+    write_failed: bool = False
+    unexpected: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        """The log's status: "ok", or the notes."""
+        return "; ".join(self.notes) or "ok"
+
+
+class Fault(Exception):
+    """Raised to end the run in a safe stop. ``cycle`` saw the fault; ``logged``: it is
+    finished (its goal sent, its sample logged), else the stop's first goal goes out in
+    it."""
+
+    def __init__(self, reason: str, cycle: Cycle | None = None, logged: bool = False) -> None:
+        super().__init__(reason)
+        self.cycle, self.logged = cycle, logged
+
+
+@dataclass
+class Commanded:
+    """The reference of the last goal the actuators received: position, rate, acceleration
+    (the stop starts from here), and that goal (the reference led by the loop's lag)."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    goal: np.ndarray
+
+
+class ControlLoop:
+    """The cycles of one connected run, on ``backend``'s clock at the settings' rate.
+
+    Keeps what the cycles share: the commanded state, the last reading, the failed reads
+    and writes (in a row, and in all), the pace along the plan (``pace``, None outside the
+    plan phase), the phase (``phase``, for the signals' record) and :attr:`status`.
+
+    Parameters
+    ----------
+    problem, settings : the run's limits and settings.
+    backend : Backend
+    lead : Lead
+        How a goal leads its reference.
+    writer : LogWriter
+        The log every cycle's sample goes to.
+    requests : FeedRequests
+        The operator's requests (the status says whether the feed is held).
+    first : Measurement
+        The reading taken on connecting: the commanded state starts at rest there.
+    plan_duration_s : float, s
+    previous : RunStatus or None
+        The status before this run (its plan time shows until the plan phase begins).
+    """
+
+    def __init__(
+        self,
+        problem: Problem,
+        settings: ExecutionSettings,
+        backend: Backend,
+        lead: Lead,
+        writer: LogWriter,
+        requests: FeedRequests,
+        first: Measurement,
+        plan_duration_s: float,
+        previous: RunStatus | None,
+    ) -> None:
+        self._problem, self._settings = problem, settings
+        self._backend, self._lead, self._writer = backend, lead, writer
+        self._requests = requests
+        self._torque_map = problem.robot.actuator.current_map
+        self._plan_duration = plan_duration_s
+        # the loop starts now, with its log's files written (the header's origin follows)
+        self.ticker = Ticker(backend.clock, 1.0 / settings.rate_hz)
+        at = first.position_rad.copy()
+        self.commanded = Commanded(at, np.zeros(2), np.zeros(2), at)
+        self.last_measurement = first
+        self.failed_cycles = self.reads_failed = self.writes_failed = 0
+        self.previous = (-self.ticker.period, True)
+        """(the last cycle's time, s; whether its goal was delivered)."""
+        self.pace: Pace | None = None
+        self.phase = "connect"
+        self.status = previous
+
+    # ------------------------------------------------------------------ I/O
+    def begin(self) -> Cycle:
+        """Wait for the next deadline and read both actuators."""
+        cycle = Cycle(self.ticker.wait())
+        try:
+            cycle.measurement = self._backend.read()
+            self.last_measurement = cycle.measurement
+        except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
+            cycle.read_failed = True
+            self.reads_failed += 1
+            cycle.notes.append(self._failure("read", error, cycle))
+        return cycle
+
+    def send(
+        self, cycle: Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
+    ) -> bool:
+        """Write the goal of a reference state (led by the loop's lag); only a write that
+        succeeded becomes the commanded state. A write reported failed counts as not
+        delivered, though a port can fail a packet that left (see
+        :mod:`spm_opt.execution.dynamixel`); the stop's first goal, one period along from
+        the last goal known, is then the one that arrived to within q̈ T²."""
+        goal = self._lead.goal(position, velocity, acceleration)
+        try:
+            self._backend.write_goal(goal)
+        except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
+            cycle.write_failed = True
+            self.writes_failed += 1
+            cycle.notes.append(self._failure("write", error, cycle))
+            return False
+        commanded = self.commanded
+        commanded.position, commanded.velocity = position, velocity
+        commanded.acceleration, commanded.goal = acceleration, goal
+        return True
+
+    def end(self, phase: str, cycle: Cycle, checked: bool) -> None:
+        """Count the cycle (failed if its read or its write did) and log it; when
+        ``checked``, a run of failures past the retry budget, a write that raised the
+        unexpected or a failed log is a fault: raises :class:`Fault` (the cycle logged)."""
+        failed = cycle.read_failed or cycle.write_failed
+        self.failed_cycles = self.failed_cycles + 1 if failed else 0
+        self.previous = (cycle.time_s, not cycle.write_failed)
+        reason = ""
+        if checked and cycle.unexpected:
+            reason = cycle.unexpected
+        elif checked and self.failed_cycles > self._settings.communication_retries:
+            reason = self._communication_lost(self.failed_cycles, cycle)
+            cycle.notes.append(reason)
+        self._log(phase, cycle)
+        if checked and not reason and self._writer.fault:
+            reason = f"log failed: {self._writer.fault}"
+        if reason:
+            raise Fault(reason, cycle, logged=True)
+
+    def _failure(self, what: str, error: Exception, cycle: Cycle) -> str:
+        """The note of a read or write that raised: a :class:`CommunicationError` is a
+        failed transaction (counted against the retry budget); anything else is
+        unexpected, a fault at once."""
+        if isinstance(error, CommunicationError):
+            _LOG.info("%s failed: %s", what, error)
+            return f"{what} failed: {error}"
+        cycle.unexpected = f"the backend's {what} raised {type(error).__name__}: {error}"
+        _LOG.debug("%s raised", what, exc_info=True)
+        return cycle.unexpected
+
+    # --------------------------------------------------------------- checks
+    def check(
+        self,
+        cycle: Cycle,
+        reference: tuple[np.ndarray, np.ndarray, np.ndarray],
+        stop_requested: str | None,
+    ) -> None:
+        """Raise :class:`Fault` on an interrupt (``stop_requested``: why), too many failed
+        cycles (this one's read included), a hardware error or a following error (the
+        measured position against the reference ``(position, rate, acceleration)`` at the
+        cycle's time); the reason joins the notes."""
+        reason = self.fault(cycle, reference[0], reference[1], stop_requested)
+        if reason:
+            if reason not in cycle.notes:
+                cycle.notes.append(reason)
+            raise Fault(reason, cycle)
+
+    def fault(
+        self,
+        cycle: Cycle,
+        expected: np.ndarray,
+        rate: np.ndarray,
+        stop_requested: str | None,
+    ) -> str:
+        """Why the run must stop after this cycle's reading ("" if it need not): see
+        :meth:`check`. Records the following error in the cycle."""
+        if stop_requested:
+            return f"interrupted ({stop_requested})"
+        if cycle.unexpected:
+            return cycle.unexpected
+        failures = self.failed_cycles + 1 if cycle.read_failed else 0
+        if failures > self._settings.communication_retries:
+            return self._communication_lost(failures, cycle)
+        measurement = cycle.measurement
+        if measurement is None:
+            return ""
+        for joint, status_bits in enumerate(measurement.hardware_error):
+            if status_bits:
+                names = ", ".join(hardware_error_names(status_bits))
+                return f"hardware error on actuator {joint + 1}: {names}"
+        error = np.abs(measurement.position_rad - expected)
+        cycle.following_error = error
+        speed = np.maximum(np.abs(rate), np.abs(measurement.velocity_rad_s))
+        allowed = following_error_limit(
+            speed, self._problem.limits.max_joint_speed, *self._settings.following_error_bounds
+        )
+        worst = int(np.argmax(error / allowed))
+        if error[worst] > allowed[worst]:
+            return (
+                f"following error of theta{worst + 1}: {error[worst] / DEG:.3f} deg "
+                f"(tolerance {allowed[worst] / DEG:.3f} deg at {speed[worst]:.3f} rad/s)"
+            )
+        return ""
+
+    def _communication_lost(self, failures: int, cycle: Cycle) -> str:
+        return (
+            f"communication lost: {failures} cycles in a row with a failed read or write "
+            f"(retry budget {self._settings.communication_retries}); last: {cycle.status}"
+        )
+
+    # ------------------------------------------------------------------ log
+    def _log(self, phase: str, cycle: Cycle) -> None:
+        """One sample: the pace along the plan (in its phase), the goal the actuators hold
+        (the last delivered) and the reading; the same as :attr:`status`."""
+        commanded, measurement, pace = self.commanded, cycle.measurement, self.pace
+        reference, goal = commanded.position, commanded.goal
+        along = None if pace is None else (pace.plan_time_s, pace.feed, pace.target)
+        torque = None
+        if measurement is None:
+            self._writer.append(
+                cycle.time_s, phase, along, reference, goal, None, None, cycle.status
+            )
+        else:
+            torque = self._torque_map.torque(measurement.current_a)
+            values = (
+                measurement.position_rad,
+                measurement.velocity_rad_s,
+                measurement.current_a,
+                torque,
+            )
+            self._writer.append(
+                cycle.time_s,
+                phase,
+                along,
+                reference,
+                goal,
+                values,
+                measurement.hardware_error,
+                cycle.status,
+            )
+        self._update_status(phase, cycle, torque)
+
+    def _update_status(self, phase: str, cycle: Cycle, torque: np.ndarray | None) -> None:
+        """Replace :attr:`status` (one assignment: a reader in another thread sees the old
+        status or the new one, whole)."""
+        pace, (_, held) = self.pace, self._requests.requested()
+        if pace is None:  # outside the plan phase the goal is not on the plan's clock
+            pace = Pace(self.status.plan_time_s if self.status else 0.0, 0.0, 0.0, 0.0)
+        error = cycle.following_error
+        self.status = RunStatus(
+            time_s=cycle.time_s,
+            phase=phase,
+            plan_time_s=pace.plan_time_s,
+            plan_duration_s=self._plan_duration,
+            feed=pace.feed,
+            feed_target=pace.target,
+            held=held,
+            following_error_rad=None if error is None else float(np.max(error)),
+            torque_nm=None if torque is None else (float(torque[0]), float(torque[1])),
+            status=cycle.status,
+        )
+
+
+def observe_hardware_errors(cycle: Cycle, errors: list[str]) -> None:
+    """During the stop and the hold: add the hardware errors ``cycle`` read to ``errors``
+    (each once)."""
+    if cycle.measurement is None:
+        return
+    for joint, status_bits in enumerate(cycle.measurement.hardware_error):
+        if status_bits:
+            entry = f"actuator {joint + 1}: {', '.join(hardware_error_names(status_bits))}"
+            if entry not in errors:
+                _LOG.warning("hardware error while stopping: %s", entry)
+                errors.append(entry)
