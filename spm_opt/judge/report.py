@@ -92,6 +92,11 @@ class Report:
     )
     """Fields the markdown's table leaves out (shown otherwise, or not at all)."""
 
+    @property
+    def accepted(self) -> bool:
+        """Whether the judge accepts the cut: no limit is violated."""
+        return not self.violations
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data for JSON; violations as dicts."""
         data = asdict(self)

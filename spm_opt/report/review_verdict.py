@@ -57,7 +57,7 @@ class Judged:
     @property
     def failed(self) -> bool:
         """Whether the judge rejects the cut: a violation, or a run that did not complete."""
-        return bool(self.report.violations) or not getattr(self.report, "completed", True)
+        return not self.report.accepted
 
 
 def judged_cuts(problem: Problem, plan: Report, run: LogReports | None = None) -> list[Judged]:

@@ -141,6 +141,11 @@ class ExecutionReport(Report):
 
     _NOT_IN_TABLE = (*Report._NOT_IN_TABLE, "resolution", "not_judged")
 
+    @property
+    def accepted(self) -> bool:
+        """Whether the judge accepts the run: no limit is violated and it completed."""
+        return super().accepted and self.completed
+
     def _notes(self) -> list[str]:
         notes = super()._notes()
         if self.angles == "true":

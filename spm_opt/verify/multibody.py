@@ -217,15 +217,6 @@ def set_state(
     data.qacc[index.dof_active], data.qacc[index.dof_passive] = qdd, phidd
 
 
-def full_acceleration(
-    model: mujoco.MjModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
-) -> np.ndarray:
-    """qacc (nv,) of all four joints for one configuration (helper for tests)."""
-    data = mujoco.MjData(model)
-    set_state(model, data, q, qd, qdd)
-    return data.qacc.copy()
-
-
 def equality_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
     """Rows of ``efc_J`` that belong to equality constraints, shape (n_eq_rows, nv)."""
     rows = np.flatnonzero(data.efc_type[: data.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
