@@ -53,13 +53,13 @@ def modules(layer: str) -> list[Path]:
 
 
 def table() -> str:
-    """The markdown table: layer, module, lines, job; top layer first."""
-    rows = ["| layer | module | lines | its job |", "|---|---|---|---|"]
+    """The markdown table: layer, module, job; top layer first (no line counts: the page
+    changes when a module comes, goes or changes its job, not at every edit)."""
+    rows = ["| layer | module | its job |", "|---|---|---|"]
     for layer in reversed(layers()):
         for path in modules(layer):
             name = str(path.relative_to(ROOT))
-            lines = len(path.read_text(encoding="utf-8").splitlines())
-            rows.append(f"| `{layer}` | `{name}` | {lines} | {job(path)} |")
+            rows.append(f"| `{layer}` | `{name}` | {job(path)} |")
     return "\n".join(rows)
 
 
