@@ -48,8 +48,7 @@ PROBLEM = ROOT / "problems" / "identification.toml"
 CRANIOTOMY = ROOT / "problems" / "craniotomy_bone_flap.toml"
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 RATE_HZ = 500.0
-"""Loop rate of the logged runs: at 100 Hz the current read each cycle is biased by the
-position loop's saw-tooth (about −0.11 N·m·s/rad × q̇), at 500 Hz by −0.015."""
+"""Loop rate of the logged runs (the logged current the mean of 2 reads a period)."""
 VALIDATION = {"duration_s": 30.0, "periods": 3, "harmonics": 5, "seed": 1}
 LENGTHS_S = (30.0, 60.0)
 """The fit log's first seconds whose standard errors are shown besides the whole log's."""

@@ -33,6 +33,7 @@ from spm_opt.execution.emulator import (
     spawn_emulator,
 )
 from spm_opt.execution.plant import PlantSettings
+from spm_opt.model import dynamics
 from spm_opt.model.actuator import ACTUATORS
 from spm_opt.problem.problem import load_problem
 
@@ -230,11 +231,23 @@ def test_connect_checks_both_actuators_enables_torque_and_reads_the_start(robot)
         measurement = backend.read()
         np.testing.assert_allclose(measurement.position_rad, start, atol=5e-3)  # sag under gravity
         assert measurement.hardware_error == (0, 0)
+        # Present Current alone (2 bytes at 621): the holding current, within the plant's
+        # noise (8 mA) and a unit of rounding, and the same through the 12-byte read
+        holding = robot.actuator.current_map.current(
+            dynamics.gravity_torque(robot, emulator.plant.position_rad[None, :])[0]
+        )
+        for current in (backend.read_current(), measurement.current_a):
+            np.testing.assert_allclose(current, holding, atol=0.05)
         described = backend.describe()
         assert described["backend"] == "dynamixel"
         assert described["model_numbers"] == [38152, 38152]
         assert described["firmware_versions"] == [0, 0]
-        assert described["communication_failures"] == {"connect": 0, "read": 0, "write": 0}
+        assert described["communication_failures"] == {
+            "connect": 0,
+            "read": 0,
+            "current read": 0,
+            "write": 0,
+        }
         json.dumps(described)
     # closing leaves the actuators holding (torque stays on); a second close does nothing
     assert emulator.plant.torque_enabled.all()
@@ -313,7 +326,7 @@ def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot)
         time.sleep(0.02)
         np.testing.assert_allclose(emulator.plant.goal_position_rad, 0.01, atol=2e-5)
         failures = backend.describe()["communication_failures"]
-        assert failures == {"connect": 0, "read": 1, "write": 1}
+        assert failures == {"connect": 0, "read": 1, "current read": 0, "write": 1}
 
 
 def test_an_overload_shows_in_the_next_read_and_blocks_the_next_connect(robot):
@@ -403,8 +416,11 @@ def test_a_vanished_device_is_a_communication_error_every_time(robot):
                 backend.write_goal(np.zeros(2))
             with pytest.raises(CommunicationError, match=r"^port: "):
                 backend.read()
+            with pytest.raises(CommunicationError, match=r"^port: "):
+                backend.read_current()
         assert backend.describe()["communication_failures"] == {
             "connect": 0,
             "read": 2,
+            "current read": 2,
             "write": 2,
         }

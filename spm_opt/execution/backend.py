@@ -114,7 +114,8 @@ class Backend(Protocol):
     """A device with two position-controlled actuators.
 
     ``connect`` opens and checks the device and enables torque in position mode;
-    ``read`` returns both actuators' state; ``write_goal`` sends both goal positions;
+    ``read`` returns both actuators' state; ``read_current`` only their Present Current
+    (the control loop reads it again between goals); ``write_goal`` sends both goal positions;
     ``close`` releases the device and leaves the actuators holding their last goal.
     ``read`` and ``write_goal`` raise :class:`CommunicationError` when a transaction
     fails; the executor takes a goal whose write raised as never delivered, and counts a
@@ -129,6 +130,10 @@ class Backend(Protocol):
 
     def read(self) -> Measurement:
         """Both actuators' state now (CommunicationError when the transaction fails)."""
+
+    def read_current(self) -> np.ndarray:
+        """Both actuators' Present Current now (2,), A, signed (CommunicationError when the
+        transaction fails)."""
 
     def write_goal(self, position_rad: np.ndarray) -> None:
         """Send both goal positions (2,), rad (CommunicationError when it fails)."""

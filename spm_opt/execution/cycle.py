@@ -1,14 +1,27 @@
 """One control cycle's I/O and checks: wait for the deadline, read both actuators, judge
 the reading, write the goal, count the failures and log the sample.
 
-:class:`ControlLoop` does each step and returns what it found (the reading, a failed
-transaction, a fault's reason); the phases of a run (:mod:`spm_opt.execution.executor`,
-:mod:`spm_opt.execution.stop`, :mod:`spm_opt.execution.rest`) decide what follows, and raise
-:class:`Fault` to end the run in the safe stop.
+The current a cycle logs is the mean of the Present Current reads made while the last
+goal was held: :attr:`~spm_opt.execution.settings.ExecutionSettings.current_reads_per_cycle`
+of them, at the middles of as many equal parts of the period (with none, the cycle's own
+read). A goal is a step, and the actuator's velocity loop answers each step with a current
+that surges and then reverses within the period; a single read, made at the same instant
+of every period, samples that ripple at one phase and turns it into a steady error.
+Measured on the simulated robot equal to its model (``problems/identification.toml``'s
+excitation at 100 Hz, the plant's current at every 1 ms step): the read just before the
+goal write lay below the period's mean current by 0.0140 and 0.0119 A per rad/s of the
+joint's rate (0.103 and 0.088 N·m·s/rad), what identification took for viscous friction
+of −0.112 and −0.095. Reads at the ends of the parts (the last one the cycle's own) miss
+the surge after the write: for a loop that answers continuously, the error falls only as
+1/N (−0.029 N·m·s/rad at N = 5 on the loop model of the robot file, 100 Hz), at the
+middles as 1/N² (−0.0005). The mean of the reads refers to the middle of the period, half
+a period before the cycle's time (:mod:`spm_opt.identify.samples`). A read that fails, or
+whose instant has passed, is left out and counted; the stop makes none but its own.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -51,6 +64,12 @@ class Ticker:
     def now(self) -> float:
         """The time since ``origin``, s."""
         return self.clock.now() - self.origin
+
+    def middles(self, count: int) -> list[float]:
+        """The middles of ``count`` equal parts of the period before the next deadline, on
+        the clock (none before the first cycle)."""
+        start = self._next - self.period
+        return [start + (k + 0.5) * self.period / count for k in range(count)] if self.ticks else []
 
 
 @dataclass
@@ -98,7 +117,8 @@ class ControlLoop:
     """The cycles of one connected run, on ``backend``'s clock at the settings' rate.
 
     Keeps what the cycles share: the commanded state, the last reading, the failed reads
-    and writes (in a row, and in all), the pace along the plan (``pace``, None outside the
+    and writes (in a row, and in all), the current reads between goals that were missed
+    (``current_reads_missed``), the pace along the plan (``pace``, None outside the
     plan phase), the phase (``phase``, for the signals' record) and :attr:`status`.
 
     Parameters
@@ -141,6 +161,7 @@ class ControlLoop:
         self.commanded = Commanded(at, np.zeros(2), np.zeros(2), at)
         self.last_measurement = first
         self.failed_cycles = self.reads_failed = self.writes_failed = 0
+        self.current_reads_missed = 0
         self.previous = (-self.ticker.period, True)
         """(the last cycle's time, s; whether its goal was delivered)."""
         self.pace: Pace | None = None
@@ -149,16 +170,46 @@ class ControlLoop:
 
     # ------------------------------------------------------------------ I/O
     def begin(self) -> Cycle:
-        """Wait for the next deadline and read both actuators."""
+        """Read the current while the last goal is held, wait for the next deadline and
+        read both actuators; the reading's current is the mean of the period's current
+        reads, if any was made."""
+        currents, unexpected = self._currents_between()
         cycle = Cycle(self.ticker.wait())
+        if unexpected is not None:
+            cycle.notes.append(self._failure("current read", unexpected, cycle))
         try:
-            cycle.measurement = self._backend.read()
-            self.last_measurement = cycle.measurement
+            measurement = self._backend.read()
+            if currents:
+                mean = np.mean(currents, axis=0)
+                measurement = dataclasses.replace(measurement, current_a=mean)
+            cycle.measurement = self.last_measurement = measurement
         except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
             cycle.read_failed = True
             self.reads_failed += 1
             cycle.notes.append(self._failure("read", error, cycle))
         return cycle
+
+    def _currents_between(self) -> tuple[list[np.ndarray], Exception | None]:
+        """The Present Current reads at the period's instants before its deadline (none in
+        the stop); those that fail or would be late are counted in
+        :attr:`current_reads_missed`. Returns the reads and an unexpected exception (one
+        other than :class:`CommunicationError`), if a read raised one."""
+        count = self._settings.current_reads_per_cycle
+        if count == 0 or self.phase == "stop":
+            return [], None
+        clock, spacing, currents = self._backend.clock, self.ticker.period / count, []
+        for instant in self.ticker.middles(count):
+            clock.sleep_until(instant)
+            if clock.now() > instant + 0.5 * spacing:
+                self.current_reads_missed += 1
+                continue
+            try:
+                currents.append(self._backend.read_current())
+            except CommunicationError:
+                self.current_reads_missed += 1
+            except Exception as error:  # noqa: BLE001 - any other failure is a fault
+                return currents, error
+        return currents, None
 
     def send(
         self, cycle: Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray

@@ -10,6 +10,9 @@ Facts from ``docs/dynamixel.md``. One control cycle is two transactions:
   (one extra transaction per actuator in error), so a healthy cycle costs nothing extra and
   an overload shows in the very next ``read``.
 - ``write_goal``: one ``GroupSyncWrite`` of 4 bytes at 596, which gets no reply.
+- ``read_current``: one sync read of 2 bytes at 621 (Present Current), which the control
+  loop makes between goals (``ExecutionSettings.current_read_spacing_s``); no retry: a
+  failed one is counted and left out of the cycle's mean.
 
 Replies that are not the reply. Protocol 2.0's status packets carry no sequence number, and
 the SDK clears the port only before it sends: a reply that comes after its request timed
@@ -103,6 +106,7 @@ ADDR_MIN_POSITION_LIMIT = 40
 ADDR_TORQUE_ENABLE = 562
 ADDR_GOAL_POSITION = 596
 ADDR_PRESENT_POSITION = 611
+ADDR_PRESENT_CURRENT = 621
 ADDR_HARDWARE_ERROR = 892
 ITEM_NAMES = {
     ADDR_OPERATING_MODE: "Operating Mode",
@@ -110,6 +114,7 @@ ITEM_NAMES = {
     ADDR_MIN_POSITION_LIMIT: "Min Position Limit",
     ADDR_TORQUE_ENABLE: "Torque Enable",
     ADDR_PRESENT_POSITION: "Present Position",
+    ADDR_PRESENT_CURRENT: "Present Current",
     ADDR_HARDWARE_ERROR: "Hardware Error Status",
 }
 READ_LENGTHS = (12, 14, 15)
@@ -284,7 +289,7 @@ class DynamixelRobot:
         self.position_limits: list[tuple[int, int]] = [(-half_turn, half_turn)] * 2
         self.model_numbers: list[int | None] = [None, None]
         self.firmware_versions: list[int | None] = [None, None]
-        self.failures = {"connect": 0, "read": 0, "write": 0}
+        self.failures = {"connect": 0, "read": 0, "current read": 0, "write": 0}
         self._sdk: Any = None
         self._port: Any = None
         self._packets: Any = None
@@ -387,6 +392,23 @@ class DynamixelRobot:
                 attempt += 1
                 logger.debug("read failed, attempt %d of %d: %s", attempt, self.retries + 1, exc)
 
+    def read_current(self) -> np.ndarray:
+        """Both actuators' Present Current, A (signed): one sync read of 2 bytes at 621.
+
+        Raises
+        ------
+        CommunicationError
+            The sync read failed (counted; not retried).
+        """
+        if self._port is None:
+            raise CommunicationError("read_current: the port is not open; call connect() first")
+        try:
+            raw, _ = self._sync_replies(self._current_read, ADDR_PRESENT_CURRENT, 2)
+        except CommunicationError:
+            self.failures["current read"] += 1
+            raise
+        return self.actuator.current([int.from_bytes(b, "little", signed=True) for b in raw])
+
     def write_goal(self, position_rad: np.ndarray) -> None:
         """Send both goal positions in one sync write.
 
@@ -467,9 +489,10 @@ class DynamixelRobot:
             sdk.GroupSyncRead(port, self._packets, ADDR_PRESENT_POSITION, length)
             for length in READ_LENGTHS
         ]
+        self._current_read = sdk.GroupSyncRead(port, self._packets, ADDR_PRESENT_CURRENT, 2)
         self._sync_write = sdk.GroupSyncWrite(port, self._packets, ADDR_GOAL_POSITION, 4)
         for dxl_id in self.ids:
-            for sync_read in self._sync_reads:
+            for sync_read in [*self._sync_reads, self._current_read]:
                 sync_read.addParam(dxl_id)
             self._sync_write.addParam(dxl_id, [0, 0, 0, 0])
         self._last_goal = None
@@ -604,26 +627,9 @@ class DynamixelRobot:
 
     def _sync_read(self, turn: int) -> Measurement:
         """The sync read of length ``READ_LENGTHS[turn]``."""
-        sdk, packets, length = self._sdk, self._packets, READ_LENGTHS[turn]
-        result = self._guarded(self._sync_reads[turn].txPacket)
-        if result != sdk.COMM_SUCCESS:
-            raise CommunicationError(f"sync read: {packets.getTxRxResult(result)}")
-        if self.timeout_s is not None:
-            self._port.setPacketTimeoutMillis(self.timeout_s * 1000.0)
-        raw, errors = [], []
-        for dxl_id in self.ids:
-            data, result, error = self._receive(dxl_id, length)
-            if result != sdk.COMM_SUCCESS:
-                raise CommunicationError(
-                    f"id {dxl_id}: no valid reply to the sync read at {ADDR_PRESENT_POSITION}: "
-                    f"{packets.getTxRxResult(result)}"
-                )
-            if error & ~ALERT_BIT:
-                raise CommunicationError(
-                    f"id {dxl_id}: sync read refused: {packets.getRxPacketError(error)}"
-                )
-            raw.append(bytes(data))
-            errors.append(error)
+        raw, errors = self._sync_replies(
+            self._sync_reads[turn], ADDR_PRESENT_POSITION, READ_LENGTHS[turn]
+        )
         hardware = tuple(
             self._read_value(dxl_id, ADDR_HARDWARE_ERROR, 1, retry=False)
             if error & ALERT_BIT
@@ -639,6 +645,32 @@ class DynamixelRobot:
             current_a=self.actuator.current(current),
             hardware_error=hardware,
         )
+
+    def _sync_replies(self, group: Any, address: int, length: int) -> tuple[list[bytes], list[int]]:
+        """Send the sync read ``group`` (``length`` bytes at ``address``) and receive each
+        id's reply: (its bytes, its error byte) per id, in the ids' order."""
+        sdk, packets = self._sdk, self._packets
+        result = self._guarded(group.txPacket)
+        if result != sdk.COMM_SUCCESS:
+            raise CommunicationError(f"sync read at {address}: {packets.getTxRxResult(result)}")
+        if self.timeout_s is not None:
+            self._port.setPacketTimeoutMillis(self.timeout_s * 1000.0)
+        raw, errors = [], []
+        for dxl_id in self.ids:
+            data, result, error = self._receive(dxl_id, length)
+            if result != sdk.COMM_SUCCESS:
+                raise CommunicationError(
+                    f"id {dxl_id}: no valid reply to the sync read at {address}: "
+                    f"{packets.getTxRxResult(result)}"
+                )
+            if error & ~ALERT_BIT:
+                raise CommunicationError(
+                    f"id {dxl_id}: sync read at {address} refused: "
+                    f"{packets.getRxPacketError(error)}"
+                )
+            raw.append(bytes(data))
+            errors.append(error)
+        return raw, errors
 
     def _send_goals(self, goals: list[int]) -> None:
         if self._port is None:

@@ -282,6 +282,10 @@ class Executor:
                     "feed_events": list(self._feed_events),
                     "samples": self._writer.samples,
                     "loop": dataclasses.asdict(statistics),
+                    "current_reads": {
+                        "per_cycle": settings.current_reads_per_cycle,
+                        "missed": loop.current_reads_missed,
+                    },
                     "backend": backend_state,
                     "exception": exception,
                 }

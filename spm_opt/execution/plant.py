@@ -248,8 +248,11 @@ class DynamixelPlant:
 
     # -------------------------------------------------------------- integration
     def advance_to(self, time_s: float) -> None:
-        """Integrate in whole internal steps up to ``time_s`` (no-op if not later)."""
-        steps = int(np.floor((time_s - self.time_s) / self.settings.step_s + 1e-9))
+        """Integrate in whole internal steps up to ``time_s`` (no-op if not later). A time
+        within a millionth of a step of a step's end counts as on it: the loop's deadlines,
+        sums of periods, drift by picoseconds, and a read on a boundary would otherwise see
+        the state one step early at some deadlines and not at others."""
+        steps = int(np.floor((time_s - self.time_s) / self.settings.step_s + 1e-6))
         for _ in range(max(steps, 0)):
             self._step()
 

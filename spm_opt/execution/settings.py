@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from spm_opt.base.errors import InputError
@@ -62,6 +63,12 @@ class ExecutionSettings:
         After a stop, longest time spent holding to confirm rest.
     flush_interval_s : float, s
         Longest time a sample waits before it is written to the log.
+    current_read_spacing_s : float, s
+        Present Current is read at the middle of each such span of a control period, and
+        the log holds the mean of those reads (:attr:`current_reads_per_cycle` of them; with
+        none, the cycle's own read): a single read at the same instant of every period
+        aliases the velocity loop's response to each goal step
+        (:mod:`spm_opt.execution.cycle`). Each read is one more bus transaction.
     log_stall_s : float, s
         A write to the log that has not returned after this long is a fault, as one that
         failed is: the run stops safely (the stop never waits on the disk).
@@ -97,6 +104,7 @@ class ExecutionSettings:
     rest_position_pulses: int = 5
     hold_s: float = 1.0
     flush_interval_s: float = 0.1
+    current_read_spacing_s: float = 0.001
     log_stall_s: float = 1.0
     feed: float = 1.0
     max_feed: float = 1.5
@@ -118,6 +126,7 @@ class ExecutionSettings:
             "rest_position_pulses": (1, 100_000),
             "hold_s": (0.0, 60.0),
             "flush_interval_s": (1e-3, 0.1),
+            "current_read_spacing_s": (1e-4, 1.0),
             "log_stall_s": (0.05, 60.0),
             "feed": (FEED_STEP, 4.0),
             "max_feed": (1.0, 4.0),
@@ -149,6 +158,12 @@ class ExecutionSettings:
                     f"{name} = {excerpt(getattr(self, name))}: expected at least rest_window_s "
                     f"({excerpt(self.rest_window_s)} s), or rest could never be confirmed"
                 )
+
+    @property
+    def current_reads_per_cycle(self) -> int:
+        """Present Current reads between goals: as many spans of ``current_read_spacing_s``
+        as fit in a period (10 at 100 Hz, 2 at 500 Hz by default; 0 above 1 kHz)."""
+        return math.floor(1.0 / (self.rate_hz * self.current_read_spacing_s) + 1e-9)
 
     @property
     def following_error_bounds(self) -> tuple[float, float]:

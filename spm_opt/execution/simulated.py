@@ -76,6 +76,11 @@ class SimulatedRobot:
             hardware_error=(int(self.plant.hardware_error[0]), int(self.plant.hardware_error[1])),
         )
 
+    def read_current(self) -> np.ndarray:
+        """The plant's Present Current now, A, as the actuators report it."""
+        self.plant.advance_to(self.clock.now() - self._epoch)
+        return self._actuator.current(self.plant.present_current_units())
+
     def write_goal(self, position_rad: np.ndarray) -> None:
         """Give both actuators new goals (2,), rad, rounded to whole pulses."""
         self.plant.advance_to(self.clock.now() - self._epoch)

@@ -6,7 +6,12 @@ into runs at the gaps and each run resampled on a uniform grid (its median step)
 motion is the measured positions and velocities, filtered without phase (a 4th-order
 Butterworth filter forward and back, ``filtfilt``) at :data:`STATE_CUTOFF_HZ`, and the
 accelerations the derivative of those velocities; the torques are the log's (the current
-through the actuator's map).
+through the actuator's map). A log's current is the mean of Present Current reads at the
+middles of equal parts of the period before each row (:mod:`spm_opt.execution.cycle`): it
+refers to the middle of the period, half a period before the row's time, and is
+resampled there. A log of one read a period (none between goals: logs from before the
+executor read more, or above 1 kHz) has no such delay, and at 100 Hz holds the velocity
+loop's ripple as a steady error: about −0.1 N·m·s/rad × q̇ on the simulated robot.
 
 Identification then filters the torques and every column of the regressor built at those
 samples through the same low-pass filter, at ``cutoff_hz`` (Gautier's parallel
@@ -23,6 +28,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -31,6 +37,7 @@ import scipy.signal
 from spm_opt.base.errors import InputError
 from spm_opt.base.input_limits import MAX_LOG_ROWS, excerpt, log_rows
 from spm_opt.execution.log import read_execution_log
+from spm_opt.execution.settings import ExecutionSettings
 
 MEASURED = (
     "position_theta1_rad",
@@ -136,8 +143,8 @@ def log_samples(
             f"logs {named(paths)}: no run of {MIN_RUN_SAMPLES} complete samples or more"
         )
     parts, slices, rates, start = [], [], [], 0
-    for path, t, values in runs:
-        rate, uniform = _uniform(path, t, values)
+    for path, t, values, reads in runs:
+        rate, uniform = _uniform(path, t, values, reads)
         if not 0.0 < cutoff_hz < 0.5 * rate:
             raise InputError(
                 f"--cutoff-hz {cutoff_hz:g}: must lie between 0 and half the log's rate "
@@ -166,17 +173,38 @@ def log_samples(
     )
 
 
-def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray]]:
-    """(path, time (n,), measurements (n, 6)) of each run of complete samples."""
-    table, _ = read_execution_log(path)
+def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray, int]]:
+    """(path, time (n,), measurements (n, 6), current reads a period) of each run of
+    complete samples."""
+    table, header = read_execution_log(path)
     t = log_values(table, ("time_s",), path)[:, 0]
     values = log_values(table, MEASURED, path)
     complete = np.all(np.isfinite(values), axis=1) & np.isfinite(t)
+    reads = current_reads_per_cycle(header)
     runs = []
     for chunk in np.split(np.arange(len(t)), np.flatnonzero(np.diff(complete.astype(int))) + 1):
         if complete[chunk[0]] and len(chunk) >= MIN_RUN_SAMPLES:
-            runs.append((path, t[chunk], values[chunk]))
+            runs.append((path, t[chunk], values[chunk], reads))
     return runs
+
+
+def current_reads_per_cycle(header: dict[str, Any]) -> int:
+    """The Present Current reads between goals a log's current averages: as its header's
+    ``current_reads`` says, or its settings (a log that ended without its outcome), else
+    0 (one read a cycle, the cycle's own)."""
+    reads = header.get("current_reads")
+    if isinstance(reads, dict) and isinstance(reads.get("per_cycle"), int):
+        return max(0, reads["per_cycle"])
+    settings = header.get("settings")
+    if isinstance(settings, dict) and "current_read_spacing_s" in settings:
+        try:
+            return ExecutionSettings(
+                rate_hz=settings["rate_hz"],
+                current_read_spacing_s=settings["current_read_spacing_s"],
+            ).current_reads_per_cycle
+        except (InputError, TypeError):
+            return 0
+    return 0
 
 
 def check_log_rows(paths: list[Path]) -> None:
@@ -212,13 +240,19 @@ def log_values(table: pd.DataFrame, columns: tuple[str, ...], path: Path) -> np.
     return values
 
 
-def _uniform(path: Path, t: np.ndarray, values: np.ndarray) -> tuple[float, np.ndarray]:
-    """A run's rate (Hz) and its measurements resampled on a uniform grid."""
+def _uniform(path: Path, t: np.ndarray, values: np.ndarray, reads: int) -> tuple[float, np.ndarray]:
+    """A run's rate (Hz) and its measurements resampled on a uniform grid; the torques,
+    with ``reads`` reads between goals, at the middle of the period before each row."""
     step = float(np.median(np.diff(t)))
     if not step > 0.0:
         raise InputError(f"log {path}: time_s does not increase")
     grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step)) + 1)
-    return 1.0 / step, np.stack([np.interp(grid, t, column) for column in values.T], axis=1)
+    delay = 0.5 * step if reads else 0.0
+    measured = [t if k < 4 else t - delay for k in range(values.shape[1])]
+    return 1.0 / step, np.stack(
+        [np.interp(grid, at, column) for at, column in zip(measured, values.T, strict=True)],
+        axis=1,
+    )
 
 
 def correlation_factor(residual: np.ndarray, lags: int) -> float:
