@@ -234,10 +234,10 @@ class LoopEstimate:
                 f"θ{joint + 1}",
                 f"{self.prior_gain_per_s[joint]:.4g}",
                 f"{self.gain_per_s[joint]:.4g} ± {self.gain_error_per_s[joint]:.2g}",
-                f"{100 * self.gain_misfit[joint]:.2g}",
+                f"{100 * self.gain_misfit[joint]:.3g}",
                 f"{self.prior_bandwidth_per_s[joint]:.4g}",
                 f"{self.bandwidth_per_s[joint]:.4g} ± {self.bandwidth_error_per_s[joint]:.2g}",
-                f"{100 * self.bandwidth_misfit[joint]:.2g}",
+                f"{100 * self.bandwidth_misfit[joint]:.3g}",
                 ", ".join(
                     label
                     for label, carried in (
@@ -380,7 +380,6 @@ def _fit(runs: list[_Run], joint: int, prior: np.ndarray) -> _Fit:
         lambda x: _residual(runs, joint, *np.exp(x)),
         np.clip(np.log(prior), *bounds),
         bounds=tuple(bounds),
-        x_scale=1.0,
     )
     jacobian, residual = result.jac, result.fun
     if not np.any(jacobian[:, 0]):
