@@ -194,16 +194,17 @@ def test_the_identified_robot_predicts_the_plant_at_least_twice_as_well(plant_lo
         identification.robot.actuator.viscous_friction_nm_s_rad
     )
     # and the actuators' loops, from the same log's goals and positions: the plant's
-    # position P gain is 32 1/s (measured 33.0 and 32.9; ωv 46 and 61 1/s from this gentle
-    # motion)
+    # position P gain is 32 1/s (measured 33.0 and 32.9); its ωv, 87 and 116 1/s, came out
+    # 46 and 61 from this gentle motion, misfits 120 % and 116 %: the prior's kept
     assert "## Actuator loops" in report
     loops = estimate_loops([fit], problem.robot)
-    assert loops.carried.all()
+    assert loops.gain_carried.all() and not loops.bandwidth_carried.any()
     assert loops.gain_per_s == pytest.approx(32.0, rel=0.04)
     assert written.actuator.position_loop_gain_per_s == pytest.approx(tuple(loops.gain_per_s))
     assert written.actuator.velocity_loop_bandwidth_per_s == pytest.approx(
-        tuple(loops.bandwidth_per_s)
+        problem.robot.actuator.velocity_loop_bandwidth_per_s
     )
+    assert "velocity_loop_bandwidth_per_s`: not identifiable from this log" in report
 
 
 @pytest.mark.slow

@@ -1,6 +1,7 @@
 """The actuators' loops from goals and positions: an exact integration of the loop model, the
-simulated robot (a PI velocity loop on the plant's inertia, not the model) and its tracking
-with the identified loops as the lead, and a joint that never moves."""
+simulated robot (a PI velocity loop on the plant's inertia, not the model) with the
+firmware's gains and with others, what reaches the robot file, the plant's loops in the
+robot file's terms, and a joint that never moves."""
 
 from __future__ import annotations
 
@@ -13,13 +14,20 @@ import pytest
 import scipy.integrate
 import scipy.interpolate
 from conftest import HARDWARE_PROBLEM
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_identify import synthetic_samples
 
 import spm_opt as so
 from spm_opt.base.errors import InputError
-from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
+from spm_opt.execution import ExecutionSettings, PlantSettings, SimulatedRobot, execute
 from spm_opt.execution.log import COLUMNS
-from spm_opt.identify.loop import estimate_loops, goal_rms
-from spm_opt.model.params import load_robot
+from spm_opt.execution.plant import DynamixelPlant, gains_for_rates, loop_rates
+from spm_opt.identify.estimate import identify
+from spm_opt.identify.loop import TOLERANCE, estimate_loops, goal_rms
+from spm_opt.identify.robot_file import robot_file_text
+from spm_opt.model.actuator import LOOP_RATE_RANGE_PER_S
+from spm_opt.model.params import Robot, load_robot
 from spm_opt.problem.trajectory import Trajectory
 
 ROBOTS = Path(__file__).resolve().parents[1] / "problems" / "robots"
@@ -71,7 +79,8 @@ def test_the_loops_of_an_exact_integration_come_out(rate_hz, duration_s, tmp_pat
     log = loop_log(tmp_path / "loop.csv", rate_hz, duration_s)
     prior = load_robot(ROBOTS / "prototype.toml")
     loops = estimate_loops([log], prior)
-    assert loops.carried.all()
+    assert loops.gain_carried.all() and loops.bandwidth_carried.all()
+    assert np.all(loops.bandwidth_misfit < 0.1 * TOLERANCE)
     # the encoder's rounding leaves errors of 1e-5 (Kp) and 3e-4 (ωv), honestly reported
     assert loops.gain_per_s == pytest.approx(GAIN_PER_S, rel=1e-4)
     assert loops.bandwidth_per_s == pytest.approx(BANDWIDTH_PER_S, rel=1e-3)
@@ -118,7 +127,7 @@ def tracking_rms(log: Path) -> np.ndarray:
     return np.sqrt(np.mean(np.square(error), axis=1))
 
 
-def test_the_plant_s_loops_come_out_and_lead_it_better(tmp_path):
+def test_the_plant_s_kp_comes_out_its_wv_does_not_and_kp_leads_it_better(tmp_path):
     problem = so.load_problem(HARDWARE_PROBLEM)
     plant = load_robot(ROBOTS / "prototype_plant.toml")
     plan = fast_excitation(problem, 6.0)
@@ -133,13 +142,161 @@ def test_the_plant_s_loops_come_out_and_lead_it_better(tmp_path):
 
     fit = run("prior", problem.robot)
     loops = estimate_loops([fit], problem.robot)
-    assert loops.carried.all()
-    # the plant's position P gain is 32 1/s (its 1 ms step makes a ramp lag as if 32.5)
+    # the plant's position P gain is 32 1/s (its 1 ms step makes a ramp lag as if 33):
+    # measured 33.06 and 32.73, misfits 2.5 % and 2.7 %
+    assert loops.gain_carried.all()
     assert loops.gain_per_s == pytest.approx(32.0, rel=0.04)
-    # measured: 0.0183° and 0.0361° RMS led by the prior's loops, 0.0117° and 0.0178° by these
+    # ωv (the plant's 87 and 116 1/s) came out 81 and 83, misfits 43 % and 25 %
+    assert not loops.bandwidth_carried.any()
+    assert np.all(loops.bandwidth_misfit > 2 * TOLERANCE)
+    # measured: 0.0183° and 0.0361° RMS led by the prior's loops, 0.0143° and 0.0344° by
+    # the identified Kp and the prior's ωv
     prior = tracking_rms(fit)
     identified = tracking_rms(run("identified", loops.robot(problem.robot)))
-    assert np.all(identified < 0.75 * prior), (prior, identified)
+    assert np.all(identified < 0.98 * prior), (prior, identified)
+
+
+def plant_log(path: Path, plant: Robot, settings: PlantSettings, rate_hz: float) -> Path:
+    """:func:`fast_excitation` (6 s) run at ``rate_hz`` on the simulated robot whose plant
+    is ``plant`` with ``settings``' gains, the goals led by the prior's loops (the following
+    error allowed to 0.1–0.2 rad: a plant unlike the prior lags it)."""
+    problem = so.load_problem(HARDWARE_PROBLEM)
+    plan = fast_excitation(problem, 6.0)
+    backend = SimulatedRobot(
+        problem.robot, start_rad=plan.position(0.0), settings=settings, plant_robot=plant
+    )
+    run = ExecutionSettings(
+        rate_hz=rate_hz,
+        other_problem=True,
+        min_following_error_rad=0.1,
+        max_following_error_rad=0.2,
+    )
+    assert execute(plan, backend, problem, path, run).completed
+    return path
+
+
+def plant_with_loops(plant: Robot, gain_per_s: float, bandwidth_per_s: tuple) -> PlantSettings:
+    """The plant's settings whose Position and Velocity P Gains give these loops (1/s)."""
+    position, velocity = gains_for_rates(
+        plant, PlantSettings(), (gain_per_s, gain_per_s), bandwidth_per_s
+    )
+    return PlantSettings(position_p_gain=position, velocity_p_gain=velocity)
+
+
+def assert_kp_carried_and_wv_not(loops, plant: Robot, settings: PlantSettings) -> None:
+    """Kp within 10 % of the plant's, carried; ωv not identifiable, for the misfit, and the
+    prior's kept (the plant's PI velocity loop leaves the goals no lag of its own)."""
+    gain, _ = loop_rates(plant, settings)
+    assert loops.gain_carried.all()
+    assert loops.gain_per_s == pytest.approx(gain, rel=0.1)
+    assert not loops.bandwidth_carried.any()
+    assert all("misfit" in reason for reason in loops.bandwidth_reason)
+    assert np.all(loops.bandwidth_misfit > 5 * TOLERANCE)
+    prior = so.load_problem(HARDWARE_PROBLEM).robot
+    robot = loops.robot(prior)
+    assert (
+        robot.actuator.velocity_loop_bandwidth_per_s == prior.actuator.velocity_loop_bandwidth_per_s
+    )
+    assert robot.actuator.position_loop_gain_per_s == pytest.approx(tuple(loops.gain_per_s))
+
+
+@pytest.mark.parametrize(
+    ("gain_per_s", "bandwidth_per_s", "rate_hz"),
+    [(20.0, (60.0, 60.0), 100.0), (40.0, (100.0, 250.0), 100.0), (60.0, (300.0, 300.0), 500.0)],
+)
+def test_plants_with_other_loops_give_kp_and_say_why_not_wv(
+    gain_per_s, bandwidth_per_s, rate_hz, tmp_path
+):
+    # measured (Kp; ωv and its misfit): (20.5, 20.6; 480 and 431, 190 % and 120 %),
+    # (41.6, 41.4; 479 and 395, 200 % and 93 %), (62.7, 62.6; 379 and 387, 115 % and 81 %)
+    plant = load_robot(ROBOTS / "prototype.toml")
+    settings = plant_with_loops(plant, gain_per_s, bandwidth_per_s)
+    assert loop_rates(plant, settings)[1] == pytest.approx(bandwidth_per_s, rel=0.01)
+    log = plant_log(tmp_path / "plant.csv", plant, settings, rate_hz)
+    assert_kp_carried_and_wv_not(estimate_loops([log], plant), plant, settings)
+
+
+def test_without_the_velocity_loop_s_integral_gravity_hides_theta1_s_kp(tmp_path):
+    # Velocity I Gain 0: the P-P loops leave gravity's error, which the model has not
+    # measured: Kp 55.0 (misfit 18 %) and 58.7 (5 %) against 60; ωv 27 and 165 against
+    # 100 and 300 (misfits 104 % and 93 %)
+    plant = load_robot(ROBOTS / "prototype.toml")
+    settings = dataclasses.replace(
+        plant_with_loops(plant, 60.0, (100.0, 300.0)), velocity_i_gain=(0, 0)
+    )
+    loops = estimate_loops([plant_log(tmp_path / "plant.csv", plant, settings, 100.0)], plant)
+    assert list(loops.gain_carried) == [False, True]
+    assert "misfit" in loops.gain_reason[0]
+    assert loops.gain_per_s[1] == pytest.approx(60.0, rel=0.1)
+    assert not loops.bandwidth_carried.any()
+    assert loops.robot(plant).actuator.position_loop_gain_per_s == pytest.approx(
+        (32.0, loops.gain_per_s[1])
+    )
+
+
+@pytest.mark.slow
+@settings(max_examples=6, deadline=None)
+@given(
+    gain_per_s=st.floats(20.0, 60.0),
+    bandwidth_per_s=st.tuples(st.floats(60.0, 300.0), st.floats(60.0, 300.0)),
+    rate_hz=st.sampled_from([100.0, 500.0]),
+)
+def test_the_firmware_s_loops_give_kp_and_never_a_wrong_wv(
+    gain_per_s, bandwidth_per_s, rate_hz, tmp_path_factory
+):
+    plant = load_robot(ROBOTS / "prototype.toml")
+    settings = plant_with_loops(plant, gain_per_s, bandwidth_per_s)
+    log = plant_log(tmp_path_factory.mktemp("plant") / "plant.csv", plant, settings, rate_hz)
+    assert_kp_carried_and_wv_not(estimate_loops([log], plant), plant, settings)
+
+
+def test_an_absurd_bandwidth_never_reaches_the_robot_file(tmp_path):
+    # without the slides' friction, nothing but the PI loop's integral is left: ωv runs to
+    # the end of the range (2e8 1/s before the range bounded the fit)
+    prior = load_robot(ROBOTS / "prototype.toml")
+    plant = dataclasses.replace(prior, friction=dataclasses.replace(prior.friction, mu=0.0))
+    log = plant_log(tmp_path / "plant.csv", plant, PlantSettings(), 100.0)
+    loops = estimate_loops([log], prior)
+    assert np.all(loops.bandwidth_per_s > 0.99 * LOOP_RATE_RANGE_PER_S[1])
+    assert all("end of the range" in reason for reason in loops.bandwidth_reason)
+    identification = identify(prior, synthetic_samples(prior, seed=0, duration_s=30.0))
+    path = tmp_path / "identified.toml"
+    text = robot_file_text(identification, loops, "identified")
+    path.write_text(text)
+    written = load_robot(path).actuator
+    assert written.velocity_loop_bandwidth_per_s == prior.actuator.velocity_loop_bandwidth_per_s
+    assert written.position_loop_gain_per_s == pytest.approx(tuple(loops.gain_per_s))
+    assert text.count("not identifiable from this log") == 2
+    summary = loops.summary()
+    assert summary.count("(prior; not identifiable: the fit reaches") == 2
+    assert "\n" not in summary
+
+
+def test_the_plant_s_loops_are_its_gains_over_its_inertia():
+    robot = load_robot(ROBOTS / "prototype.toml")
+    # no friction, no gravity at θ = 0, and 2.5e-3 kg·m² of rotor inertia on each joint
+    robot = dataclasses.replace(
+        robot,
+        friction=dataclasses.replace(robot.friction, mu=0.0),
+        actuator=dataclasses.replace(robot.actuator, rotor_inertia_kg_m2=2.5e-3),
+    )
+    settings = PlantSettings(
+        position_p_gain=(45, 20), velocity_p_gain=(300, 100), velocity_i_gain=(0, 0)
+    )
+    gain, bandwidth = loop_rates(robot, settings)
+    assert gain == pytest.approx([45.0, 20.0])
+    assert gains_for_rates(robot, settings, tuple(gain), tuple(bandwidth)) == ((45, 20), (300, 100))
+    for joint in range(2):
+        # one implicit step from rest: (M + Δt K) v⁺ = Δt K Kp e, so v⁺ / (Δt (Kp e − v⁺)) = K/M
+        plant = DynamixelPlant(robot, settings)
+        for j in range(2):
+            plant.enable_torque(j, True)
+        plant.goal_position_rad[joint] += 1e-3
+        plant.advance_to(settings.step_s)
+        rate = plant.velocity_rad_s[joint]
+        command = gain[joint] * 1e-3
+        assert rate / (settings.step_s * (command - rate)) == pytest.approx(bandwidth[joint])
+        assert plant.velocity_rad_s[1 - joint] == pytest.approx(0.0, abs=1e-12)
 
 
 def test_a_joint_that_never_moves_is_a_one_line_error(tmp_path):

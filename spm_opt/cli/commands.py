@@ -334,12 +334,7 @@ def _identify(args: argparse.Namespace) -> None:
         f"identified {identified[0]:.4f}, {identified[1]:.4f} N·m",
         file=sys.stderr,
     )
-    print(
-        f"actuator loops: position_loop_gain_per_s {loops.gain_per_s[0]:.4g}, "
-        f"{loops.gain_per_s[1]:.4g}; velocity_loop_bandwidth_per_s "
-        f"{loops.bandwidth_per_s[0]:.4g}, {loops.bandwidth_per_s[1]:.4g} (1/s)",
-        file=sys.stderr,
-    )
+    print(loops.summary(), file=sys.stderr)
 
 
 def _compare(args: argparse.Namespace) -> None:

@@ -21,8 +21,12 @@ firmware's scaling of its gain units to physical units is not published: the fac
 :class:`PlantSettings` are assumptions, chosen for this robot's inertia (about
 0.005 kg·m² per joint): with the default gains (position P 32, velocity P 256, velocity
 I 16) the position loop has a 32 1/s bandwidth (a 5 mrad lag at 0.17 rad/s) and the
-velocity loop about 30 Hz. The anti-windup of the firmware (a gain the user cannot set)
-is modelled as conditional integration: the integrator holds while the current saturates.
+velocity loop about 30 Hz. :class:`PlantSettings` also holds the gains the actuators
+power on with (the defaults, or others for a plant with other loops);
+:func:`loop_rates` gives a plant's loops in the robot file's terms (Kp and ωv, 1/s) and
+:func:`gains_for_rates` the gains for wanted ones. The anti-windup of the firmware (a gain
+the user cannot set) is modelled as conditional integration: the integrator holds while the
+current saturates.
 The velocity loop's proportional and integral terms are integrated implicitly, so the
 step is stable at any gain.
 
@@ -57,6 +61,9 @@ DEFAULT_VELOCITY_I_GAIN = 16
 OVERLOAD_BIT = 5
 """Hardware Error Status bit of an overload."""
 
+Pair = tuple[float, float]
+Matrix = tuple[Pair, Pair]
+
 
 @dataclass(frozen=True)
 class PlantSettings:
@@ -69,6 +76,9 @@ class PlantSettings:
     position_gain_per_unit : float, 1/s per unit of Position P Gain
     velocity_p_gain_per_unit : float, N·m/(rad/s) per unit of Velocity P Gain
     velocity_i_gain_per_unit : float, N·m/rad per unit of Velocity I Gain
+    position_p_gain, velocity_p_gain, velocity_i_gain : (int, int), control-table units
+        The actuators' gains (θ1, θ2) at power-on (the control table's defaults unless a test
+        builds a plant with other loops: :func:`gains_for_rates`).
     current_noise_a : float, A
         Standard deviation of the noise on Present Current (before quantisation).
     moving_threshold_rad_s : float, rad/s
@@ -81,9 +91,42 @@ class PlantSettings:
     position_gain_per_unit: float = 1.0
     velocity_p_gain_per_unit: float = 3.7e-3
     velocity_i_gain_per_unit: float = 2.5
+    position_p_gain: tuple[int, int] = (DEFAULT_POSITION_P_GAIN, DEFAULT_POSITION_P_GAIN)
+    velocity_p_gain: tuple[int, int] = (DEFAULT_VELOCITY_P_GAIN, DEFAULT_VELOCITY_P_GAIN)
+    velocity_i_gain: tuple[int, int] = (DEFAULT_VELOCITY_I_GAIN, DEFAULT_VELOCITY_I_GAIN)
     current_noise_a: float = 0.008
     moving_threshold_rad_s: float = 0.01
     seed: int = 0
+
+
+def loop_rates(robot: Robot, settings: PlantSettings) -> tuple[np.ndarray, np.ndarray]:
+    """A plant's loops in the robot file's terms, per joint (2,), 1/s: Kp, the Position P
+    Gain's; ωv, the Velocity P Gain's N·m·s/rad over the joint's inertia at θ = 0 (M's
+    diagonal of ``robot``, reflected rotor inertia included)."""
+    gain = settings.position_gain_per_unit * np.array(settings.position_p_gain, dtype=float)
+    damping = settings.velocity_p_gain_per_unit * np.array(settings.velocity_p_gain, dtype=float)
+    return gain, damping / _joint_inertia(robot)
+
+
+def gains_for_rates(
+    robot: Robot, settings: PlantSettings, gain_per_s: Pair, bandwidth_per_s: Pair
+) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The Position P Gains and Velocity P Gains (control-table units, rounded; per joint)
+    that give a plant of ``robot`` the loops Kp ``gain_per_s`` and ωv ``bandwidth_per_s``
+    (1/s per joint; the inverse of :func:`loop_rates`); ``settings`` gives the units."""
+    inertia = _joint_inertia(robot)
+    position = [round(kp / settings.position_gain_per_unit) for kp in gain_per_s]
+    velocity = [
+        round(wv * m / settings.velocity_p_gain_per_unit)
+        for wv, m in zip(bandwidth_per_s, inertia, strict=True)
+    ]
+    return (position[0], position[1]), (velocity[0], velocity[1])
+
+
+def _joint_inertia(robot: Robot) -> np.ndarray:
+    """Each joint's inertia at θ = 0 (2,), kg·m²: M's diagonal plus the rotor's."""
+    mass = dynamics.mass_matrix(robot, np.zeros(2))[0]
+    return np.diag(mass) + robot.actuator.rotor_inertia_kg_m2
 
 
 @dataclass(frozen=True)
@@ -190,9 +233,9 @@ class DynamixelPlant:
         self.torque_enabled = np.zeros(2, dtype=bool)
         self.velocity_limit_rad_s = np.full(2, actuator.velocity_limit_rad_s)
         self.current_limit_a = np.full(2, actuator.continuous_current_a * 1.5)
-        self.position_p_gain = np.full(2, DEFAULT_POSITION_P_GAIN, dtype=np.int64)
-        self.velocity_p_gain = np.full(2, DEFAULT_VELOCITY_P_GAIN, dtype=np.int64)
-        self.velocity_i_gain = np.full(2, DEFAULT_VELOCITY_I_GAIN, dtype=np.int64)
+        self.position_p_gain = np.array(self.settings.position_p_gain, dtype=np.int64)
+        self.velocity_p_gain = np.array(self.settings.velocity_p_gain, dtype=np.int64)
+        self.velocity_i_gain = np.array(self.settings.velocity_i_gain, dtype=np.int64)
         self.hardware_error = np.zeros(2, dtype=np.int64)
         self.encoder_stuck = np.zeros(2, dtype=bool)
         self._reported_pulses = actuator.pulses(start + robot.encoder_offset)
@@ -329,10 +372,6 @@ class DynamixelPlant:
         k = min(max(bisect.bisect_right(torques, magnitude) - 1, 0), len(torques) - 2)
         slope = (currents[k + 1] - currents[k]) / (torques[k + 1] - torques[k])
         return math.copysign(currents[k] + slope * (magnitude - torques[k]), torque_nm)
-
-
-Pair = tuple[float, float]
-Matrix = tuple[Pair, Pair]
 
 
 class _StepProblem:
