@@ -48,7 +48,7 @@ PROBLEM = ROOT / "problems" / "identification.toml"
 CRANIOTOMY = ROOT / "problems" / "craniotomy_bone_flap.toml"
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 RATE_HZ = 500.0
-"""Loop rate of the logged runs (the logged current the mean of 2 reads a period)."""
+"""Loop rate of the logged runs (the logged current one read at each period's middle)."""
 VALIDATION = {"duration_s": 30.0, "periods": 3, "harmonics": 5, "seed": 1}
 LENGTHS_S = (30.0, 60.0)
 """The fit log's first seconds whose standard errors are shown besides the whole log's."""

@@ -29,7 +29,7 @@ from spm_opt.problem.trajectory import Trajectory
 
 ROBOTS = Path(__file__).resolve().parents[1] / "problems" / "robots"
 RATE_HZ = 500.0
-"""The identification runs' loop rate (the logged current the mean of 2 reads a period)."""
+"""The identification runs' loop rate (the logged current one read at each period's middle)."""
 SIGMAS = 2.0
 """The estimated gear efficiency lies within this many of its standard errors of the truth,
 and so does every identified base parameter, from synthetic torques (where the model is
@@ -321,26 +321,25 @@ def test_a_robot_file_written_reads_back_the_same_robot(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("spacing_s", "viscous_range"),
+    ("reads", "viscous_range"),
     [
-        pytest.param(None, (-0.01, 0.01), id="reads-averaged"),
-        pytest.param(1.0, (-0.2, -0.05), id="one-read-a-cycle"),
+        pytest.param(10, (-0.01, 0.01), id="ten-reads-a-period"),
+        pytest.param(0, (-0.2, -0.05), id="one-read-a-period"),
     ],
 )
 def test_a_plant_equal_to_the_model_shows_friction_only_where_a_single_read_aliases(
-    spacing_s, viscous_range, tmp_path
+    reads, viscous_range, tmp_path
 ):
     """100 Hz, the plant equal to the model (no drive friction): with the current read at
-    the middles of the period's parts (the default, 10 reads) the joints' viscous friction
-    comes out within ±0.01 N·m·s/rad of 0 and the model predicts the filtered torques to
-    their noise; with one read a cycle, the velocity loop's ripple at the read's instant
-    shows as viscous friction of about −0.1 (the bias this averaging removes)."""
+    the middles of the period's ten parts (one in each of the plant's 1 ms steps) the
+    joints' viscous friction comes out within ±0.01 N·m·s/rad of 0, within two standard
+    errors, and the model predicts the filtered torques to 0.01 N·m; with the cycle's own
+    read alone, the velocity loop's ripple at the read's instant shows as viscous friction
+    of about −0.1 (the bias the averaging removes)."""
     problem = so.load_problem(HARDWARE_PROBLEM)
     plan = excitation(problem, 60.0, seed=3)
     backend = SimulatedRobot(problem.robot, start_rad=plan.position(0.0))
-    settings = ExecutionSettings(rate_hz=100.0)
-    if spacing_s is not None:
-        settings = dataclasses.replace(settings, current_read_spacing_s=spacing_s)
+    settings = ExecutionSettings(rate_hz=100.0, current_reads_per_cycle=reads)
     log = tmp_path / "run.csv"
     assert execute(plan, backend, problem, log, settings).completed
     samples = log_samples([log], 2.0, None, 0.02)
@@ -350,8 +349,8 @@ def test_a_plant_equal_to_the_model_shows_friction_only_where_a_single_read_alia
     for joint in (1, 2):
         value, error = rows[f"viscous_friction.theta{joint}"]
         assert low <= value <= high, (joint, value, error)
-        if spacing_s is None:
+        if reads:
             assert abs(value) <= 2.0 * error, (joint, value, error)
-    if spacing_s is None:
+    if reads:
         prior_rms = prediction_rms(problem.robot, samples)
         assert np.all(prior_rms < 0.01), prior_rms

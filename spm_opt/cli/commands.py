@@ -52,6 +52,7 @@ def _execute(args: argparse.Namespace) -> None:
             max_hold_s=args.max_hold,
             other_problem=args.other_problem,
             tracking=args.tracking,
+            current_reads_per_cycle=_current_reads(args),
         )
     except InputError as error:  # name the option the user gave, not the setting
         setting = str(error).split(" = ")[0]
@@ -100,7 +101,26 @@ def _execute(args: argparse.Namespace) -> None:
         raise GateFailed(_outcome(result))
 
 
+SIMULATED_CURRENT_READS = 10
+"""``execute --current-reads`` on the simulated robot by default: one read in each 1 ms
+step of the plant at 100 Hz, whose mean is the period's current; reads there cost no bus
+time."""
+
+
+def _current_reads(args: argparse.Namespace) -> int:
+    """``--current-reads``, or its default for the backend (sim: every step of the plant's
+    at 100 Hz, fewer at higher rates; dynamixel: 0, the bus's time kept for the loop)."""
+    if args.current_reads is not None:
+        return args.current_reads
+    if args.backend != "sim" or not args.rate > 0:
+        return 0
+    from spm_opt.execution.plant import PlantSettings
+
+    return max(0, min(SIMULATED_CURRENT_READS, int(1.0 / (args.rate * PlantSettings.step_s))))
+
+
 _SETTING_OPTIONS = {
+    "current_reads_per_cycle": "--current-reads",
     "rate_hz": "--rate",
     "feed": "--feed",
     "max_feed": "--feed",

@@ -1,22 +1,23 @@
 """One control cycle's I/O and checks: wait for the deadline, read both actuators, judge
 the reading, write the goal, count the failures and log the sample.
 
-The current a cycle logs is the mean of the Present Current reads made while the last
-goal was held: :attr:`~spm_opt.execution.settings.ExecutionSettings.current_reads_per_cycle`
-of them, at the middles of as many equal parts of the period (with none, the cycle's own
-read). A goal is a step, and the actuator's velocity loop answers each step with a current
-that surges and then reverses within the period; a single read, made at the same instant
-of every period, samples that ripple at one phase and turns it into a steady error.
-Measured on the simulated robot equal to its model (``problems/identification.toml``'s
+The current a cycle logs is the cycle's own Present Current read, or, with
+:attr:`~spm_opt.execution.settings.ExecutionSettings.current_reads_per_cycle` N > 0, the
+mean of N reads made while the last goal was held, at the middles of N equal parts of the
+period. A goal is a step, and the actuator's velocity loop answers each step with a
+current that surges and then reverses within the period; one read, made at the same
+instant of every period, samples that ripple at one phase and turns it into a steady
+error. Measured on the simulated robot equal to its model (``problems/identification.toml``'s
 excitation at 100 Hz, the plant's current at every 1 ms step): the read just before the
 goal write lay below the period's mean current by 0.0140 and 0.0119 A per rad/s of the
 joint's rate (0.103 and 0.088 N·m·s/rad), what identification took for viscous friction
-of −0.112 and −0.095. Reads at the ends of the parts (the last one the cycle's own) miss
-the surge after the write: for a loop that answers continuously, the error falls only as
-1/N (−0.029 N·m·s/rad at N = 5 on the loop model of the robot file, 100 Hz), at the
-middles as 1/N² (−0.0005). The mean of the reads refers to the middle of the period, half
-a period before the cycle's time (:mod:`spm_opt.identify.samples`). A read that fails, or
-whose instant has passed, is left out and counted; the stop makes none but its own.
+of −0.112 and −0.095. On the loop model of the robot file (a continuous first-order
+velocity loop, 100 Hz), reads at the parts' ends would leave an error falling as 1/N
+(−0.029 N·m·s/rad at N = 5), at their middles as 1/N² (−0.0005); on the plant, whose
+current is constant over each 1 ms step, 10 reads at 100 Hz take one in every step. The
+mean refers to the middle of the period, half a period before the cycle's time
+(:mod:`spm_opt.identify.samples`). A read that fails, whose instant has passed, or that
+would not end before the deadline is left out and counted; the stop makes none.
 """
 
 from __future__ import annotations
@@ -39,6 +40,12 @@ from spm_opt.model.params import DEG
 from spm_opt.problem.problem import Problem
 
 _LOG = logging.getLogger(__name__)
+
+CURRENT_READ_SMOOTHING = 0.1
+"""Weight of each current read's duration in their moving average."""
+CURRENT_READ_MARGIN = 2.0
+"""A current read is begun only if this many times the average read would end before the
+cycle's deadline."""
 
 
 class Ticker:
@@ -64,6 +71,11 @@ class Ticker:
     def now(self) -> float:
         """The time since ``origin``, s."""
         return self.clock.now() - self.origin
+
+    @property
+    def deadline(self) -> float:
+        """The next deadline, on the clock, s."""
+        return self._next
 
     def middles(self, count: int) -> list[float]:
         """The middles of ``count`` equal parts of the period before the next deadline, on
@@ -162,6 +174,7 @@ class ControlLoop:
         self.last_measurement = first
         self.failed_cycles = self.reads_failed = self.writes_failed = 0
         self.current_reads_missed = 0
+        self._current_read_s = 0.0
         self.previous = (-self.ticker.period, True)
         """(the last cycle's time, s; whether its goal was delivered)."""
         self.pace: Pace | None = None
@@ -200,7 +213,9 @@ class ControlLoop:
         clock, spacing, currents = self._backend.clock, self.ticker.period / count, []
         for instant in self.ticker.middles(count):
             clock.sleep_until(instant)
-            if clock.now() > instant + 0.5 * spacing:
+            start = clock.now()
+            late = start > instant + 0.5 * spacing
+            if late or start + CURRENT_READ_MARGIN * self._current_read_s > self.ticker.deadline:
                 self.current_reads_missed += 1
                 continue
             try:
@@ -209,6 +224,10 @@ class ControlLoop:
                 self.current_reads_missed += 1
             except Exception as error:  # noqa: BLE001 - any other failure is a fault
                 return currents, error
+            # a read is begun only if twice the time reads take (a moving average) would
+            # end it before the deadline: the cycle's own read seldom waits for one
+            took = clock.now() - start
+            self._current_read_s += CURRENT_READ_SMOOTHING * (took - self._current_read_s)
         return currents, None
 
     def send(

@@ -11,7 +11,7 @@ Facts from ``docs/dynamixel.md``. One control cycle is two transactions:
   an overload shows in the very next ``read``.
 - ``write_goal``: one ``GroupSyncWrite`` of 4 bytes at 596, which gets no reply.
 - ``read_current``: one sync read of 2 bytes at 621 (Present Current), which the control
-  loop makes between goals (``ExecutionSettings.current_read_spacing_s``); no retry: a
+  loop makes while a goal is held (``ExecutionSettings.current_reads_per_cycle``); no retry: a
   failed one is counted and left out of the cycle's mean.
 
 Replies that are not the reply. Protocol 2.0's status packets carry no sequence number, and

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from spm_opt.base.errors import InputError
@@ -63,12 +62,12 @@ class ExecutionSettings:
         After a stop, longest time spent holding to confirm rest.
     flush_interval_s : float, s
         Longest time a sample waits before it is written to the log.
-    current_read_spacing_s : float, s
-        Present Current is read at the middle of each such span of a control period, and
-        the log holds the mean of those reads (:attr:`current_reads_per_cycle` of them; with
-        none, the cycle's own read): a single read at the same instant of every period
-        aliases the velocity loop's response to each goal step
-        (:mod:`spm_opt.execution.cycle`). Each read is one more bus transaction.
+    current_reads_per_cycle : int
+        Present Current reads while a goal is held, at the middles of as many equal parts
+        of the period (0 to 20); the log holds their mean instead of the cycle's own read,
+        which, made at the same instant of every period, aliases the velocity loop's
+        answer to each goal step (:mod:`spm_opt.execution.cycle`). Each read is one more
+        bus transaction: 0 (the default) leaves the loop's timing as it is.
     log_stall_s : float, s
         A write to the log that has not returned after this long is a fault, as one that
         failed is: the run stops safely (the stop never waits on the disk).
@@ -104,7 +103,7 @@ class ExecutionSettings:
     rest_position_pulses: int = 5
     hold_s: float = 1.0
     flush_interval_s: float = 0.1
-    current_read_spacing_s: float = 0.001
+    current_reads_per_cycle: int = 0
     log_stall_s: float = 1.0
     feed: float = 1.0
     max_feed: float = 1.5
@@ -126,7 +125,7 @@ class ExecutionSettings:
             "rest_position_pulses": (1, 100_000),
             "hold_s": (0.0, 60.0),
             "flush_interval_s": (1e-3, 0.1),
-            "current_read_spacing_s": (1e-4, 1.0),
+            "current_reads_per_cycle": (0, 20),
             "log_stall_s": (0.05, 60.0),
             "feed": (FEED_STEP, 4.0),
             "max_feed": (1.0, 4.0),
@@ -138,7 +137,7 @@ class ExecutionSettings:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and low <= value <= high):
                 raise InputError(f"{name} = {excerpt(value)}: expected a number in [{low}, {high}]")
-        for name in ("communication_retries", "rest_position_pulses"):
+        for name in ("communication_retries", "rest_position_pulses", "current_reads_per_cycle"):
             if not isinstance(getattr(self, name), int):
                 raise InputError(f"{name} = {excerpt(getattr(self, name))}: expected an integer")
         for name in ("approach", "other_problem"):
@@ -158,12 +157,6 @@ class ExecutionSettings:
                     f"{name} = {excerpt(getattr(self, name))}: expected at least rest_window_s "
                     f"({excerpt(self.rest_window_s)} s), or rest could never be confirmed"
                 )
-
-    @property
-    def current_reads_per_cycle(self) -> int:
-        """Present Current reads between goals: as many spans of ``current_read_spacing_s``
-        as fit in a period (10 at 100 Hz, 2 at 500 Hz by default; 0 above 1 kHz)."""
-        return math.floor(1.0 / (self.rate_hz * self.current_read_spacing_s) + 1e-9)
 
     @property
     def following_error_bounds(self) -> tuple[float, float]:

@@ -25,6 +25,7 @@ variances.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -37,7 +38,8 @@ import scipy.signal
 from spm_opt.base.errors import InputError
 from spm_opt.base.input_limits import MAX_LOG_ROWS, excerpt, log_rows
 from spm_opt.execution.log import read_execution_log
-from spm_opt.execution.settings import ExecutionSettings
+
+_LOG = logging.getLogger(__name__)
 
 MEASURED = (
     "position_theta1_rad",
@@ -181,6 +183,13 @@ def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray, int]]:
     values = log_values(table, MEASURED, path)
     complete = np.all(np.isfinite(values), axis=1) & np.isfinite(t)
     reads = current_reads_per_cycle(header)
+    if reads == 0:
+        _LOG.warning(
+            "log %s: its current is one read a control period, which aliases the velocity "
+            "loop's answer to each goal (at 100 Hz as viscous friction of about -0.1 "
+            "N·m·s/rad); log identification runs with execute --current-reads",
+            path,
+        )
     runs = []
     for chunk in np.split(np.arange(len(t)), np.flatnonzero(np.diff(complete.astype(int))) + 1):
         if complete[chunk[0]] and len(chunk) >= MIN_RUN_SAMPLES:
@@ -189,21 +198,15 @@ def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray, int]]:
 
 
 def current_reads_per_cycle(header: dict[str, Any]) -> int:
-    """The Present Current reads between goals a log's current averages: as its header's
-    ``current_reads`` says, or its settings (a log that ended without its outcome), else
-    0 (one read a cycle, the cycle's own)."""
-    reads = header.get("current_reads")
-    if isinstance(reads, dict) and isinstance(reads.get("per_cycle"), int):
-        return max(0, reads["per_cycle"])
-    settings = header.get("settings")
-    if isinstance(settings, dict) and "current_read_spacing_s" in settings:
-        try:
-            return ExecutionSettings(
-                rate_hz=settings["rate_hz"],
-                current_read_spacing_s=settings["current_read_spacing_s"],
-            ).current_reads_per_cycle
-        except (InputError, TypeError):
-            return 0
+    """The Present Current reads while a goal was held that a log's current averages: as
+    its header's ``current_reads`` says, or its settings (a log that ended without its
+    outcome), else 0 (the cycle's own read)."""
+    for value in (
+        (header.get("current_reads") or {}).get("per_cycle"),
+        (header.get("settings") or {}).get("current_reads_per_cycle"),
+    ):
+        if isinstance(value, int) and value >= 0:
+            return value
     return 0
 
 
