@@ -67,9 +67,15 @@ import numpy as np
 import scipy.optimize
 
 from spm_opt.base.errors import InputError
-from spm_opt.identify.physical_robot import robot_with_parameters, standard_estimate
+from spm_opt.identify.physical_robot import (
+    not_negative,
+    physical_fit,
+    prior_spread,
+    robot_with_parameters,
+    standard_estimate,
+)
 from spm_opt.identify.samples import Samples, correlation_factor
-from spm_opt.model.base_parameters import base_parameters
+from spm_opt.model.base_parameters import BaseParameters, base_parameters
 from spm_opt.model.params import Robot
 from spm_opt.model.regressor import STANDARD_PARAMETERS, regressor, standard_parameters, unit
 
@@ -86,6 +92,17 @@ EFFICIENCY_BOUNDS = (0.5, 1.0)
 EFFICIENCY_STEP = 0.01
 """Step in η of the finite differences of the motor-torque misfit (its curvature) and of
 the estimate (its slope)."""
+PRIOR_WEIGHT = 1e-8
+"""The prior's weight in the base parameters' physically consistent fit: enough to settle
+what the torques leave open, too little to move a base parameter by a measurable share of
+its standard error."""
+AT_BOUND_SIGMAS = 0.01
+"""A bounded base parameter within this many standard errors of 0 sits at its bound."""
+MOVED_SIGMAS = 2.0
+"""A base parameter the constraints moved by more than this many standard errors from the
+unconstrained estimate is not identified."""
+LIVELIER = 10.0
+"""A parameter that would need a log this many times longer needs a livelier motion."""
 LOSS_SIGNIFICANCE = 2.0
 """The robot file carries the estimated η when the loss 1 − η is at least this many
 standard errors; below, the logs do not tell its gear train from a lossless one and it
@@ -101,9 +118,17 @@ class Identification:
     names : list of str
         Each base parameter as its combination of standard parameters.
     units : list of str
-    prior, estimate, standard_error : ndarray, shape (r,)
-        β of the problem's robot, β from weighted least squares and its standard errors.
+    prior, unconstrained, estimate, standard_error : ndarray, shape (r,)
+        β of the problem's robot; β from weighted least squares; β physically consistent
+        (:func:`~spm_opt.identify.physical_robot.physical_fit` with a negligible prior); the
+        weighted least squares' standard errors.
+    bounded : ndarray of bool, shape (r,)
+        The base parameters the physical constraints keep ≥ 0 (sums of parameters each ≥ 0).
+    active : list of str
+        The physical constraints that hold the consistent estimate back.
     identified : ndarray of bool, shape (r,)
+        Off its bound, not moved by the constraints (:attr:`moved`), and two standard
+        errors at most 10 % of the estimate.
     efficiency_prior, efficiency, efficiency_error : float
         The gear efficiency η of the problem's robot, η from the logs and its standard
         error (:func:`identify`).
@@ -127,6 +152,8 @@ class Identification:
         The standard parameters no motion shows (their regressor columns are zero).
     standard : ndarray, shape (38,)
         The robot file's standard parameters (:data:`STANDARD_PARAMETERS`).
+    file_active : list of str
+        The physical constraints that hold the robot file's fit back.
     robot : Robot
         The identified robot, its actuator loops the prior's
         (:func:`~spm_opt.identify.robot_file.robot_file_text` writes them as
@@ -136,9 +163,11 @@ class Identification:
     names: list[str]
     units: list[str]
     prior: np.ndarray
+    unconstrained: np.ndarray
     estimate: np.ndarray
     standard_error: np.ndarray
-    identified: np.ndarray
+    bounded: np.ndarray
+    active: list[str]
     efficiency_prior: float
     efficiency: float
     efficiency_error: float
@@ -151,7 +180,75 @@ class Identification:
     duration_s: float
     unseen: list[str]
     standard: np.ndarray
+    file_active: list[str]
     robot: Robot
+
+    @property
+    def shift_sigmas(self) -> np.ndarray:
+        """(r,) How far the constraints moved each estimate from the unconstrained one, in
+        standard errors (signed)."""
+        return (self.estimate - self.unconstrained) / self.standard_error
+
+    @property
+    def at_bound(self) -> np.ndarray:
+        """(r,) bool: a bounded parameter the constraints hold at 0 (within
+        :data:`AT_BOUND_SIGMAS` standard errors)."""
+        return self.bounded & (self.estimate <= AT_BOUND_SIGMAS * self.standard_error)
+
+    @property
+    def moved(self) -> np.ndarray:
+        """(r,) bool: off its own bound, but moved more than :data:`MOVED_SIGMAS` standard
+        errors by the constraints on others."""
+        return ~self.at_bound & (np.abs(self.shift_sigmas) > MOVED_SIGMAS)
+
+    @property
+    def identified(self) -> np.ndarray:
+        """(r,) bool: neither at its bound nor moved, and two standard errors within 10 %
+        of the estimate."""
+        precise = IDENTIFIED_SIGMAS * self.standard_error <= IDENTIFIED_RELATIVE_ERROR * np.abs(
+            self.estimate
+        )
+        return precise & ~self.at_bound & ~self.moved
+
+    def reasons(self) -> list[str]:
+        """Per base parameter, why it is identified or not, in words."""
+        seconds = self.seconds_for_identification()
+        share = np.divide(
+            IDENTIFIED_SIGMAS * self.standard_error,
+            np.abs(self.estimate),
+            out=np.full(self.estimate.shape, np.inf),
+            where=self.estimate != 0.0,
+        )
+        words = []
+        for k, name in enumerate(self.names):
+            shift = abs(self.shift_sigmas[k])
+            moved = f"; the constraints moved it {shift:.1f} s.e." if shift >= 0.1 else ""
+            if self.at_bound[k]:
+                side = (
+                    "beyond"
+                    if self.shift_sigmas[k] > 0.0
+                    else "inside it; the constraints on others hold it there"
+                )
+                words.append(
+                    f"at its bound ({name} ≥ 0): the unconstrained fit, "
+                    f"{self.unconstrained[k]:.3g}, lay {abs(self.shift_sigmas[k]):.1f} s.e. {side}"
+                )
+            elif self.moved[k]:
+                words.append(
+                    f"moved {abs(self.shift_sigmas[k]):.1f} s.e. by the physical constraints "
+                    "active (below the table)"
+                )
+            elif self.identified[k]:
+                words.append(f"2 s.e. within 10 % ({100 * share[k]:.2g} %){moved}")
+            elif not np.isfinite(share[k]) or seconds[k] > LIVELIER * self.duration_s:
+                words.append(
+                    f"2 s.e. are {_percent(share[k])} of it: its torques are below the noise, "
+                    f"a livelier motion shows it{moved}"
+                )
+            else:
+                more = seconds[k] - self.duration_s
+                words.append(f"2 s.e. are {_percent(share[k])} of it: log {more:.3g} s more{moved}")
+        return words
 
     def base_rows(self) -> list[tuple[str, str, float, float, float, bool]]:
         """Per base parameter: name, unit, prior, estimate, standard error, identified."""
@@ -189,6 +286,11 @@ class Identification:
         to 10 % of the loss 1 − η; inf where η is 1."""
         loss = np.array([1.0 - self.efficiency])
         return float(_seconds(self.duration_s, np.array([self.efficiency_error]), loss)[0])
+
+
+def _percent(share: float) -> str:
+    """A share as a percentage for a reason, 'all' where infinite."""
+    return f"{100 * share:.3g} %" if np.isfinite(share) else "infinitely many times"
 
 
 def _seconds(duration_s: float, errors: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -361,20 +463,25 @@ def identify(robot: Robot, samples: Samples) -> Identification:
     target = profile.target(used)
     residual_std = _residual_std(columns, target)
     weighted, rhs = _stacked(columns, target, residual_std)
-    estimate, *_ = np.linalg.lstsq(weighted, rhs, rcond=None)
+    estimate, *_ = np.linalg.lstsq(weighted, rhs, rcond=None)  # unconstrained
     variance = float(np.sum((rhs - weighted @ estimate) ** 2) / max(len(rhs) - base.rank, 1))
     covariance = efficiency.correlation * variance * np.linalg.inv(weighted.T @ weighted)
     errors = np.sqrt(np.diag(covariance))
     if efficiency.significant:  # β's errors at a given η, and η's through dβ/dη
         errors = np.hypot(errors, efficiency.slope * efficiency.error)
-    standard = standard_estimate(robot, *_stacked(filtered, target, residual_std))
+    rows = _stacked(filtered, target, residual_std)
+    prior = standard_parameters(robot)
+    consistent = physical_fit(robot, *rows, prior_spread(prior), PRIOR_WEIGHT, file_structure=False)
+    fitted = standard_estimate(robot, *rows)
     return Identification(
         names=base.names(),
         units=[unit(STANDARD_PARAMETERS[k]) for k in base.independent],
-        prior=base.values(standard_parameters(robot)),
-        estimate=estimate,
+        prior=base.values(prior),
+        unconstrained=estimate,
+        estimate=base.values(consistent.standard),
         standard_error=errors,
-        identified=IDENTIFIED_SIGMAS * errors <= IDENTIFIED_RELATIVE_ERROR * np.abs(estimate),
+        bounded=_bounded(base),
+        active=consistent.active,
         efficiency_prior=robot.actuator.gear_efficiency,
         efficiency=efficiency.estimate,
         efficiency_error=efficiency.error,
@@ -386,9 +493,24 @@ def identify(robot: Robot, samples: Samples) -> Identification:
         samples=len(target),
         duration_s=samples.duration_s,
         unseen=[STANDARD_PARAMETERS[k] for k in base.unseen],
-        standard=standard,
-        robot=robot_with_parameters(robot, standard, used),
+        standard=fitted.standard,
+        file_active=fitted.active,
+        robot=robot_with_parameters(robot, fitted.standard, used),
     )
+
+
+def _bounded(base: BaseParameters) -> np.ndarray:
+    """(r,) bool: the base parameters the physical constraints keep ≥ 0, sums of standard
+    parameters that are each ≥ 0 (masses, friction, rotor inertias, diagonal inertias),
+    with positive weights."""
+    flags = []
+    for row, index in enumerate(base.independent):
+        terms = [index, *base.dependent[base.combination[row] != 0.0]]
+        weights = base.combination[row][base.combination[row] != 0.0]
+        flags.append(
+            all(not_negative(STANDARD_PARAMETERS[k]) for k in terms) and np.all(weights > 0)
+        )
+    return np.array(flags, dtype=bool)
 
 
 def _condition(columns: np.ndarray, weights_std: np.ndarray) -> float:

@@ -1,31 +1,42 @@
-"""The identified robot: the standard parameters closest to the prior's under physical bounds.
+"""Standard parameters fitted under physical constraints: the base parameters' physically
+consistent estimate, and the identified robot.
 
-The robot file is the estimate of the standard parameters π closest to the problem's robot,
-at the η it carries (:func:`spm_opt.identify.estimate.identify`): the weighted rows and, for
-each parameter, a row (π_k − prior_k) / s_k
-with s_k half the prior's value (or a floor per kind of parameter; the products of inertia
-kept): a prior of 50 % uncertainty that settles what the logs leave open, solved under the
-physical bounds (masses, diagonal inertias, friction and rotor inertia not negative) with
-``scipy.optimize.lsq_linear``, in what a robot file holds: one rotor inertia for both
-joints and one rail friction coefficient μ, φ_u = μ (m_u + m_payload) and φ_L = μ m_L.
-These are bilinear in μ and the masses, so the linear solve at the prior's masses starts
-``scipy.optimize.least_squares`` over all of them at once. Solving again at the last
-solution's masses until they settled instead (a fixed point that ignores how the rails'
-rows pull on the masses) drifted to m_u = 0 and μ = 0.07 on four of eight emulator logs
-of a plant equal to the model (μ 0.24), and that file predicted the torques worse than the
-model; the joint solve gave m_u 0.087–0.095 kg (0.0878) and μ 0.16–0.24 on all eight.
-Splitting a free fit's two rails into one μ afterwards, the other parameters
-fitted to the split they had, made the validation error two to three times larger. The
-drives' offsets, which the robot file cannot hold, are in its comments
+Physical consistency (Wensing, Kim and Slotine, RA-L 2017; Sousa and Cortesão, IJRR 2014):
+each body's mass at least :data:`MASS_FLOOR` of the prior's (a mass > 0); its inertia about
+its mass centre I_c positive definite with its principal moments obeying the triangle
+inequalities, which is Σ_c = ½ tr(I_c)·1 − I_c positive definite (the pseudo-inertia's
+second moment with the mass centre fixed, as the model fixes it: Rucker and Wensing,
+RA-L 2022), asked as Σ_c − δ·1 = L Lᵀ with L lower triangular, its diagonal ≥ 0 and δ
+:data:`PD_MARGIN` of the prior's largest moment (CasADi has no semidefinite solver; this
+Cholesky form is a smooth one IPOPT solves, and a factor's diagonal at 0 is a triangle
+inequality holding with equality); friction and rotor inertia ≥ 0. :func:`physical_fit`
+minimises the weighted torques' misfit plus a Gaussian prior on π under these constraints
+with CasADi + IPOPT, and says which constraints hold the solution back.
+
+:func:`~spm_opt.identify.estimate.identify` calls it twice. With a negligible prior
+(:data:`~spm_opt.identify.estimate.PRIOR_WEIGHT`), its π gives the base parameters'
+physically consistent estimate β = K π; what the torques leave open (the standard
+parameters no motion shows, the splits of a combination) the prior settles. For the robot
+file (:func:`standard_estimate`), with the prior at its weight 1 and a standard deviation of
+:data:`PRIOR_SHARE` of each prior value (or a floor per kind of parameter; the products of
+inertia kept), in what a robot file holds: one rotor inertia for both joints and one rail
+friction coefficient μ, φ_u = μ (m_u + m_payload) and φ_L = μ m_L, bilinear in μ and the
+masses, all solved at once. (With the earlier scipy solve, fixing the masses and solving
+again until they settled drifted to m_u = 0 and μ = 0.07 on four of eight emulator logs of a
+plant equal to the model, whose μ is 0.24; solving for the masses and μ together gave
+m_u 0.087–0.095 kg, 0.0878 in the model, and μ 0.16–0.24 on all eight.) The drives'
+offsets, which the robot file cannot hold, are in its comments
 (:mod:`spm_opt.identify.robot_file`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
+from typing import Any
 
+import casadi as ca
 import numpy as np
-import scipy.optimize
 
 from spm_opt.base.errors import SpmOptError
 from spm_opt.model.params import Robot
@@ -53,6 +64,26 @@ PRODUCT_SPREAD = 1e-9
 (a few-mm offset of a 0.1 kg body makes ~1e-5 kg·m², far below what current-based torques
 resolve)."""
 _NOT_NEGATIVE = ("mass", "rail_friction", "rotor_inertia", "viscous_friction", "coulomb_friction")
+MASS_FLOOR = 1e-3
+"""A body's mass is at least this share of the prior's (masses > 0)."""
+PD_MARGIN = 1e-6
+"""Σ_c − δ·1 is positive semidefinite with δ this share of the prior body's largest principal
+moment: its inertia positive definite, the triangle inequalities strict. The prototype's
+upper arc, nearly flat, has Σ_c's smallest eigenvalue 1.7e-5 of its largest moment."""
+INERTIA_SCALE_FLOOR = 1e-9
+"""The scale of a body's inertia (kg·m²) where the prior's is smaller."""
+ACTIVE_MULTIPLIER = 1e-2
+"""A bound holds the solution back when its multiplier is above this: relaxing it by one
+prior standard deviation (or a Cholesky factor's diagonal by one unit of its scale) would
+lower the objective, in squared weighted residuals, by that much. (An interior point's
+multiplier of a bound that does not bind is its barrier's, μ / distance: at most 1e-3 on
+the simulated robot's logs.)"""
+_MU_SPREAD = 0.05
+"""The scale of the rails' friction coefficient μ in the robot file's fit (1)."""
+_TRIANGLE = ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2))
+"""The entries of a lower-triangular 3 × 3 factor, in the order of its variables."""
+_TRIANGLE_WORDS = "inertia's principal moments on a triangle inequality (I_c > 0)"
+_IPOPT = {"print_level": 0, "sb": "yes", "tol": 1e-10, "max_iter": 500, "bound_relax_factor": 0.0}
 _UPPER_MASS = STANDARD_PARAMETERS.index("upper_platform.mass")
 _LOWER_MASS = STANDARD_PARAMETERS.index("lower_platform.mass")
 _RAILS = (
@@ -65,83 +96,199 @@ _ROTOR = (
 )
 INERTIA_ROUND_OFF = 1e-6
 """A body's inertia eigenvalue below 0 by at most this share of its largest is round-off of
-the bounded solve (a flat body's smallest is 0), set to 0; further below, an error."""
+the constrained solve, set to 0; further below, an error."""
 
 
-def standard_estimate(robot: Robot, weighted: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """π (38,) closest to the prior robot's under the physical bounds, in what a robot file
-    holds (:func:`_file_basis`; module docstring), from the weighted rows of the standard
-    regressor (both joints' rows stacked, each divided by its joint's residual standard
-    deviation) and their weighted torques ``rhs``, N·m."""
+@dataclass(frozen=True)
+class PhysicalFit:
+    """Standard parameters fitted under the physical constraints.
+
+    Attributes
+    ----------
+    standard : ndarray, shape (38,)
+        π (:data:`STANDARD_PARAMETERS`), SI.
+    active : list of str
+        The constraints that hold π back at the solution, in words (e.g.
+        ``viscous_friction.theta1 >= 0``, ``upper_arc: inertia's triangle inequality``).
+    """
+
+    standard: np.ndarray
+    active: list[str]
+
+
+def physical_fit(
+    robot: Robot,
+    weighted: np.ndarray,
+    rhs: np.ndarray,
+    spread: np.ndarray,
+    prior_weight: float,
+    file_structure: bool,
+) -> PhysicalFit:
+    """π (38,) minimising ‖weighted π − rhs‖² + w ‖(π − prior) / spread‖² under the physical
+    constraints (module docstring) by CasADi + IPOPT: ``weighted`` the rows of the
+    standard regressor (both joints' rows, each divided by its joint's residual standard
+    deviation), ``rhs`` their weighted torques, N·m, ``spread`` the prior's standard
+    deviation of each parameter (38,), SI, w ``prior_weight``; with ``file_structure``, in
+    what a robot file holds (one rotor inertia, one rail friction coefficient μ)."""
     prior = standard_parameters(robot)
-    spread = _prior_spread(prior)
-    a = np.vstack([weighted, np.diag(1.0 / spread)])
-    b = np.concatenate([rhs, prior / spread])
-    low = _lower_bounds()
-    masses = (robot.upper_platform.mass, robot.lower_platform.mass)
-    basis, kept = _file_basis(masses, robot.payload.mass)
-    start = scipy.optimize.lsq_linear(a @ basis, b, bounds=(low[kept], np.inf)).x
-    at = {index: k for k, index in enumerate(kept)}
-    upper, lower, mu = at[_UPPER_MASS], at[_LOWER_MASS], at[_RAILS[0]]
-
-    def file_basis(z: np.ndarray) -> np.ndarray:
-        return _file_basis((z[upper], z[lower]), robot.payload.mass)[0]
-
-    def jacobian(z: np.ndarray) -> np.ndarray:
-        d_standard = file_basis(z)  # π = N(m) z, and the rails' rows μ m also move with m
-        d_standard[_RAILS[0], upper] += z[mu]
-        d_standard[_RAILS[1], lower] += z[mu]
-        return a @ d_standard
-
-    solution = scipy.optimize.least_squares(
-        lambda z: a @ (file_basis(z) @ z) - b,
-        start,
-        jac=jacobian,
-        bounds=(low[kept], np.inf),
-        x_scale="jac",
+    normal, gradient = weighted.T @ weighted, weighted.T @ rhs
+    x = ca.SX.sym("x", len(prior))  # π = prior + spread x (μ in the upper rail's slot)
+    free = prior + spread * x
+    entries = [free[k] for k in range(len(prior))]
+    low = (_lower_bounds(prior) - prior) / spread
+    high = np.full(len(prior), np.inf)
+    if file_structure:
+        mu = robot.friction.mu + _MU_SPREAD * x[_RAILS[0]]
+        low[_RAILS[0]] = -robot.friction.mu / _MU_SPREAD
+        entries[_RAILS[0]] = mu * (free[_UPPER_MASS] + robot.payload.mass)
+        entries[_RAILS[1]] = mu * free[_LOWER_MASS]
+        entries[_ROTOR[1]] = free[_ROTOR[0]]
+        for tied in (_RAILS[1], _ROTOR[1]):
+            low[tied] = high[tied] = 0.0
+    standard = ca.vertcat(*entries)
+    deviation = (standard - prior) / spread
+    objective = (
+        ca.dot(standard, ca.mtimes(ca.DM(normal), standard))
+        - 2.0 * ca.dot(ca.DM(gradient), standard)
+        + float(rhs @ rhs)
+        + prior_weight * ca.dot(deviation, deviation)
     )
-    return file_basis(solution.x) @ solution.x
+    factors, constraints, starts = [], [], []
+    for body in BODIES:  # Σ_c − δ·1 = L Lᵀ, L lower triangular with diagonal >= 0
+        sigma, scale, start = _second_moment(body, standard, prior)
+        factor = ca.SX.sym(f"L_{body}", 6)
+        lower = ca.SX.zeros(3, 3)
+        for k, (i, j) in enumerate(_TRIANGLE):
+            lower[i, j] = np.sqrt(scale) * factor[k]
+        difference = sigma - ca.mtimes(lower, lower.T)
+        constraints += [difference[i, j] / scale for i, j in _TRIANGLE]
+        factors.append(factor)
+        starts.append(start)
+    variables = ca.vertcat(x, *factors)
+    factor_low = np.tile([0.0 if i == j else -np.inf for i, j in _TRIANGLE], len(BODIES))
+    solver = ca.nlpsol(
+        "physical_fit",
+        "ipopt",
+        {"x": variables, "f": objective, "g": ca.vertcat(*constraints)},
+        {"ipopt": _IPOPT, "print_time": False},
+    )
+    lbx = np.concatenate([low, factor_low])
+    ubx = np.concatenate([high, np.full(len(factor_low), np.inf)])
+    solution = solver(
+        x0=np.concatenate([np.clip(np.zeros(len(prior)), low, high), *starts]),
+        lbx=lbx,
+        ubx=ubx,
+        lbg=0.0,
+        ubg=0.0,
+    )
+    if not solver.stats()["success"]:
+        raise SpmOptError(
+            "identification: the physically constrained fit did not converge "
+            f"({solver.stats()['return_status']})"
+        )
+    values = np.asarray(solution["x"]).ravel()
+    multipliers = np.asarray(solution["lam_x"]).ravel()
+    at_bound = -multipliers > ACTIVE_MULTIPLIER
+    values[at_bound] = lbx[at_bound]  # the interior point stops just short of the bound
+    result = np.asarray(ca.Function("pi", [x], [standard])(values[: len(prior)])).ravel()
+    names = [*_bound_names(file_structure), *[f"{b}: {_TRIANGLE_WORDS}" for b in BODIES]]
+    binding = np.flatnonzero(at_bound)
+    active = []
+    for index in binding:
+        name = names[index] if index < len(prior) else names[len(prior) + (index - len(prior)) // 6]
+        if name and name not in active:
+            active.append(name)
+    return PhysicalFit(result, active)
 
 
-def _prior_spread(prior: np.ndarray) -> np.ndarray:
-    """The prior's standard deviation s_k of each standard parameter (38,), SI."""
+def standard_estimate(robot: Robot, weighted: np.ndarray, rhs: np.ndarray) -> PhysicalFit:
+    """The robot file's π (38,): the fit closest to the prior robot's under the physical
+    constraints, in what a robot file holds (:func:`physical_fit` with a prior of
+    :data:`PRIOR_SHARE`; module docstring), from the weighted rows of the standard regressor
+    and their weighted torques ``rhs``, N·m."""
+    spread = prior_spread(standard_parameters(robot), products=PRODUCT_SPREAD)
+    return physical_fit(robot, weighted, rhs, spread, 1.0, file_structure=True)
+
+
+def _second_moment(
+    body: str, standard: ca.SX, prior: np.ndarray
+) -> tuple[ca.SX, float, np.ndarray]:
+    """``body``'s Σ_c − δ·1 (3, 3) as an expression of π (Σ_c = ½ tr(I_c)·1 − I_c, positive
+    definite exactly where I_c's principal moments obey the triangle inequalities), the scale
+    of its entries (kg·m²) and the prior's scaled Cholesky factor (6,), its start."""
+    index = {ij: STANDARD_PARAMETERS.index(f"{body}.inertia.{ij}") for ij in INERTIA_ENTRIES}
+
+    def tensor(values: Any) -> Any:
+        xx, yy, zz, xy, xz, yz = (values[index[ij]] for ij in INERTIA_ENTRIES)
+        rows = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
+        return ca.blockcat(rows) if isinstance(values, ca.SX) else np.array(rows)
+
+    prior_inertia = tensor(prior)
+    largest = float(np.max(np.abs(np.linalg.eigvalsh(prior_inertia))))
+    scale = max(largest, INERTIA_SCALE_FLOOR)
+    margin = PD_MARGIN * scale
+    inertia = tensor(standard)
+    sigma = 0.5 * ca.trace(inertia) * ca.DM.eye(3) - inertia - margin * ca.DM.eye(3)
+    prior_sigma = 0.5 * np.trace(prior_inertia) * np.eye(3) - prior_inertia - margin * np.eye(3)
+    values, vectors = np.linalg.eigh(prior_sigma)
+    clipped = (vectors * np.maximum(values, 1e-3 * scale)) @ vectors.T
+    cholesky = np.linalg.cholesky(clipped / scale)
+    return sigma, scale, np.array([cholesky[i, j] for i, j in _TRIANGLE])
+
+
+def _bound_names(file_structure: bool) -> list[str]:
+    """The constraint each entry of x's lower bound stands for, in words ("" for none)."""
+    names = []
+    for k, name in enumerate(STANDARD_PARAMETERS):
+        bounded = _kind(name) in _NOT_NEGATIVE
+        if file_structure and k == _RAILS[0]:
+            names.append("friction.mu >= 0")
+        elif file_structure and k in (_RAILS[1], _ROTOR[1]):
+            names.append("")
+        elif bounded:
+            names.append(f"{name} {'> 0' if _kind(name) == 'mass' else '>= 0'}")
+        else:
+            names.append("")
+    return names
+
+
+def prior_spread(prior: np.ndarray, products: float | None = None) -> np.ndarray:
+    """The prior's standard deviation s_k of each standard parameter (38,), SI:
+    :data:`PRIOR_SHARE` of its value or :data:`PRIOR_FLOOR`, the products of inertia
+    ``products`` (kg·m²; None: the inertias' floor)."""
     return np.array(
         [
-            PRODUCT_SPREAD
-            if _product_of_inertia(name)
+            products
+            if products is not None and _product_of_inertia(name)
             else max(PRIOR_SHARE * abs(value), PRIOR_FLOOR[_kind(name)])
             for name, value in zip(STANDARD_PARAMETERS, prior, strict=True)
         ]
     )
 
 
-def _lower_bounds() -> np.ndarray:
-    """The physical lower bound of each standard parameter (38,): 0 for masses, diagonal
-    inertias, friction and rotor inertia, −inf for the others."""
+def _lower_bounds(prior: np.ndarray) -> np.ndarray:
+    """The lower bound of each standard parameter (38,): :data:`MASS_FLOOR` of the prior's
+    for masses, 0 for friction and rotor inertia, −inf for the others (the inertias are
+    bounded by their triangle inequalities)."""
     return np.array(
         [
-            0.0 if _kind(n) in _NOT_NEGATIVE or _diagonal_inertia(n) else -np.inf
-            for n in STANDARD_PARAMETERS
+            MASS_FLOOR * value
+            if _kind(name) == "mass"
+            else (0.0 if _kind(name) in _NOT_NEGATIVE else -np.inf)
+            for name, value in zip(STANDARD_PARAMETERS, prior, strict=True)
         ]
     )
+
+
+def not_negative(name: str) -> bool:
+    """Whether the physical constraints keep the standard parameter ``name`` ≥ 0: a mass,
+    friction, a rotor inertia or a diagonal entry of an inertia (positive definite)."""
+    return _kind(name) in _NOT_NEGATIVE or _diagonal_inertia(name)
 
 
 def _kind(name: str) -> str:
     parts = name.split(".")
     return parts[1] if parts[0] in BODIES else parts[0]
-
-
-def _file_basis(masses: tuple[float, float], payload_kg: float) -> tuple[np.ndarray, np.ndarray]:
-    """N (38, 36), π = N z, and the indices of π that z keeps: what a robot file holds,
-    one rotor inertia for both joints and the rails' friction from one μ (φ_u = μ (m_u +
-    m_payload), φ_L = μ m_L at the platforms' ``masses`` m_u, m_L, kg), z's entries of
-    those μ and J, the others π's."""
-    basis = np.eye(len(STANDARD_PARAMETERS))
-    basis[_ROTOR[1], _ROTOR[0]] = 1.0
-    basis[_RAILS[0], _RAILS[0]] = masses[0] + payload_kg
-    basis[_RAILS[1], _RAILS[0]] = masses[1]
-    kept = np.delete(np.arange(len(STANDARD_PARAMETERS)), [_ROTOR[1], _RAILS[1]])
-    return basis[:, kept], kept
 
 
 def _diagonal_inertia(name: str) -> bool:
