@@ -6,26 +6,31 @@ each body's mass at least :data:`MASS_FLOOR` of the prior's (a mass > 0); its in
 its mass centre I_c positive definite with its principal moments obeying the triangle
 inequalities, which is Σ_c = ½ tr(I_c)·1 − I_c positive definite (the pseudo-inertia's
 second moment with the mass centre fixed, as the model fixes it: Rucker and Wensing,
-RA-L 2022), asked as Σ_c − δ·1 = L Lᵀ with L lower triangular, its diagonal ≥ 0 and δ
-:data:`PD_MARGIN` of the prior's largest moment (CasADi has no semidefinite solver; this
-Cholesky form is a smooth one IPOPT solves, and a factor's diagonal at 0 is a triangle
+RA-L 2022), asked as Σ_c − δ·1 positive semidefinite, δ :data:`PD_MARGIN` of the prior's
+largest moment: its seven principal minors ≥ 0 (CasADi has no semidefinite solver; the
+minors are smooth constraints IPOPT takes, and a body whose minors bind has a triangle
 inequality holding with equality); friction and rotor inertia ≥ 0. :func:`physical_fit`
 minimises the weighted torques' misfit plus a Gaussian prior on π under these constraints
-with CasADi + IPOPT, and says which constraints hold the solution back.
+with CasADi + IPOPT, and says which constraints hold the solution back. (Two other forms
+were tried on synthetic torques: Σ_c − δ·1 = L Lᵀ as equality constraints left IPOPT's
+restoration phase failing with 1e-4 N·m of noise, and π's inertias as functions of a
+Cholesky or L D Lᵀ factor with bounds alone crawled for thousands of iterations on a 32 s
+log; the minors converged in 30 to 80.)
 
 :func:`~spm_opt.identify.estimate.identify` calls it twice. With a negligible prior
 (:data:`~spm_opt.identify.estimate.PRIOR_WEIGHT`), its π gives the base parameters'
 physically consistent estimate β = K π; what the torques leave open (the standard
 parameters no motion shows, the splits of a combination) the prior settles. For the robot
 file (:func:`standard_estimate`), with the prior at its weight 1 and a standard deviation of
-:data:`PRIOR_SHARE` of each prior value (or a floor per kind of parameter; the products of
-inertia kept), in what a robot file holds: one rotor inertia for both joints and one rail
-friction coefficient μ, φ_u = μ (m_u + m_payload) and φ_L = μ m_L, bilinear in μ and the
-masses, all solved at once. (With the earlier scipy solve, fixing the masses and solving
-again until they settled drifted to m_u = 0 and μ = 0.07 on four of eight emulator logs of a
-plant equal to the model, whose μ is 0.24; solving for the masses and μ together gave
-m_u 0.087–0.095 kg, 0.0878 in the model, and μ 0.16–0.24 on all eight.) The drives'
-offsets, which the robot file cannot hold, are in its comments
+:data:`PRIOR_SHARE` of each prior value (or a floor per kind of parameter), the products of
+inertia held at the prior's (a few-mm offset of a 0.1 kg body makes ~1e-5 kg·m², far below
+what current-based torques resolve), in what a robot file holds: one rotor inertia for both
+joints and one rail friction coefficient μ, φ_u = μ (m_u + m_payload) and φ_L = μ m_L,
+bilinear in μ and the masses, all solved at once. (With the earlier scipy solve, fixing the
+masses and solving again until they settled drifted to m_u = 0 and μ = 0.07 on four of eight
+emulator logs of a plant equal to the model, whose μ is 0.24; solving for the masses and μ
+together gave m_u 0.087–0.095 kg, 0.0878 in the model, and μ 0.16–0.24 on all eight.) The
+drives' offsets, which the robot file cannot hold, are in its comments
 (:mod:`spm_opt.identify.robot_file`).
 """
 
@@ -33,7 +38,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -59,10 +63,6 @@ PRIOR_FLOOR = {
     "offset": 0.05,
 }
 """The prior's standard deviation where the prior value is small, per kind (SI)."""
-PRODUCT_SPREAD = 1e-9
-"""The prior's standard deviation of the products of inertia, kg·m²: kept at the prior's
-(a few-mm offset of a 0.1 kg body makes ~1e-5 kg·m², far below what current-based torques
-resolve)."""
 _NOT_NEGATIVE = ("mass", "rail_friction", "rotor_inertia", "viscous_friction", "coulomb_friction")
 MASS_FLOOR = 1e-3
 """A body's mass is at least this share of the prior's (masses > 0)."""
@@ -70,20 +70,33 @@ PD_MARGIN = 1e-6
 """Σ_c − δ·1 is positive semidefinite with δ this share of the prior body's largest principal
 moment: its inertia positive definite, the triangle inequalities strict. The prototype's
 upper arc, nearly flat, has Σ_c's smallest eigenvalue 1.7e-5 of its largest moment."""
+MINOR_TOLERANCE = 1e-9
+"""A body's principal minor (in units of its prior's largest moment) below 0 by at most this
+is the interior point's round-off; further below, the fit failed."""
+RANK_TOLERANCE = 1e-10
+"""Singular values of the weighted rows below this share of the largest are round-off."""
 INERTIA_SCALE_FLOOR = 1e-9
 """The scale of a body's inertia (kg·m²) where the prior's is smaller."""
 ACTIVE_MULTIPLIER = 1e-2
 """A bound holds the solution back when its multiplier is above this: relaxing it by one
-prior standard deviation (or a Cholesky factor's diagonal by one unit of its scale) would
-lower the objective, in squared weighted residuals, by that much. (An interior point's
-multiplier of a bound that does not bind is its barrier's, μ / distance: at most 1e-3 on
-the simulated robot's logs.)"""
+prior standard deviation (a body's minors by one unit) would lower the objective, in
+squared weighted residuals, by that much (a bound that does not bind has only the interior
+point's barrier multiplier, μ / distance)."""
 _MU_SPREAD = 0.05
 """The scale of the rails' friction coefficient μ in the robot file's fit (1)."""
-_TRIANGLE = ((0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2))
-"""The entries of a lower-triangular 3 × 3 factor, in the order of its variables."""
 _TRIANGLE_WORDS = "inertia's principal moments on a triangle inequality (I_c > 0)"
-_IPOPT = {"print_level": 0, "sb": "yes", "tol": 1e-10, "max_iter": 500, "bound_relax_factor": 0.0}
+_IPOPT = {
+    "print_level": 0,
+    "sb": "yes",
+    "tol": 1e-9,
+    "acceptable_tol": 1e-5,
+    "acceptable_iter": 5,
+    "max_iter": 1000,
+    "bound_relax_factor": 0.0,
+}
+"""IPOPT's settings: bounds kept exactly; five iterations in a row within 1e-5 suffice (a
+synthetic log's fit converged to 6e-6 and then stalled in its line search, and IPOPT's
+restoration phase left it worse)."""
 _UPPER_MASS = STANDARD_PARAMETERS.index("upper_platform.mass")
 _LOWER_MASS = STANDARD_PARAMETERS.index("lower_platform.mass")
 _RAILS = (
@@ -110,10 +123,14 @@ class PhysicalFit:
     active : list of str
         The constraints that hold π back at the solution, in words (e.g.
         ``viscous_friction.theta1 >= 0``, ``upper_arc: inertia's triangle inequality``).
+    stopped : str
+        "" when IPOPT converged; otherwise why it stopped (π is physical, checked, if perhaps
+        not the closest fit).
     """
 
     standard: np.ndarray
     active: list[str]
+    stopped: str
 
 
 def physical_fit(
@@ -131,7 +148,12 @@ def physical_fit(
     deviation of each parameter (38,), SI, w ``prior_weight``; with ``file_structure``, in
     what a robot file holds (one rotor inertia, one rail friction coefficient μ)."""
     prior = standard_parameters(robot)
-    normal, gradient = weighted.T @ weighted, weighted.T @ rhs
+    # the misfit as ‖F (π − π_ls)‖² about a least-squares solution π_ls, F from the
+    # weighted rows' singular values above round-off: a sum of squares, never below 0
+    _, singular, right = np.linalg.svd(weighted, full_matrices=False)
+    kept = singular > RANK_TOLERANCE * singular[0]
+    factor_rows = singular[kept, None] * right[kept]
+    solution_ls = np.linalg.lstsq(weighted, rhs, rcond=None)[0]
     x = ca.SX.sym("x", len(prior))  # π = prior + spread x (μ in the upper rail's slot)
     free = prior + spread * x
     entries = [free[k] for k in range(len(prior))]
@@ -143,62 +165,50 @@ def physical_fit(
         entries[_RAILS[0]] = mu * (free[_UPPER_MASS] + robot.payload.mass)
         entries[_RAILS[1]] = mu * free[_LOWER_MASS]
         entries[_ROTOR[1]] = free[_ROTOR[0]]
-        for tied in (_RAILS[1], _ROTOR[1]):
+        held = [k for k, name in enumerate(STANDARD_PARAMETERS) if _product_of_inertia(name)]
+        for tied in (_RAILS[1], _ROTOR[1], *held):  # the products of inertia the prior's
             low[tied] = high[tied] = 0.0
     standard = ca.vertcat(*entries)
     deviation = (standard - prior) / spread
-    objective = (
-        ca.dot(standard, ca.mtimes(ca.DM(normal), standard))
-        - 2.0 * ca.dot(ca.DM(gradient), standard)
-        + float(rhs @ rhs)
-        + prior_weight * ca.dot(deviation, deviation)
-    )
-    factors, constraints, starts = [], [], []
-    for body in BODIES:  # Σ_c − δ·1 = L Lᵀ, L lower triangular with diagonal >= 0
-        sigma, scale, start = _second_moment(body, standard, prior)
-        factor = ca.SX.sym(f"L_{body}", 6)
-        lower = ca.SX.zeros(3, 3)
-        for k, (i, j) in enumerate(_TRIANGLE):
-            lower[i, j] = np.sqrt(scale) * factor[k]
-        difference = sigma - ca.mtimes(lower, lower.T)
-        constraints += [difference[i, j] / scale for i, j in _TRIANGLE]
-        factors.append(factor)
-        starts.append(start)
-    variables = ca.vertcat(x, *factors)
-    factor_low = np.tile([0.0 if i == j else -np.inf for i, j in _TRIANGLE], len(BODIES))
+    offset = standard - solution_ls
+    misfit = ca.mtimes(ca.DM(factor_rows), offset)
+    objective = ca.dot(misfit, misfit) + prior_weight * ca.dot(deviation, deviation)
+    minors = ca.vertcat(*(_minors(body, standard, prior) for body in BODIES))
     solver = ca.nlpsol(
         "physical_fit",
         "ipopt",
-        {"x": variables, "f": objective, "g": ca.vertcat(*constraints)},
+        {"x": x, "f": objective, "g": minors},
         {"ipopt": _IPOPT, "print_time": False},
     )
-    lbx = np.concatenate([low, factor_low])
-    ubx = np.concatenate([high, np.full(len(factor_low), np.inf)])
-    solution = solver(
-        x0=np.concatenate([np.clip(np.zeros(len(prior)), low, high), *starts]),
-        lbx=lbx,
-        ubx=ubx,
-        lbg=0.0,
-        ubg=0.0,
-    )
-    if not solver.stats()["success"]:
+    result = solver(x0=np.zeros(len(prior)), lbx=low, ubx=high, lbg=0.0, ubg=np.inf)
+    values = np.asarray(result["x"]).ravel()
+    stats = solver.stats()
+    if not np.all(np.isfinite(values)):
         raise SpmOptError(
-            "identification: the physically constrained fit did not converge "
-            f"({solver.stats()['return_status']})"
+            f"identification: the physically constrained fit failed ({stats['return_status']})"
         )
-    values = np.asarray(solution["x"]).ravel()
-    multipliers = np.asarray(solution["lam_x"]).ravel()
-    at_bound = -multipliers > ACTIVE_MULTIPLIER
-    values[at_bound] = lbx[at_bound]  # the interior point stops just short of the bound
-    result = np.asarray(ca.Function("pi", [x], [standard])(values[: len(prior)])).ravel()
-    names = [*_bound_names(file_structure), *[f"{b}: {_TRIANGLE_WORDS}" for b in BODIES]]
-    binding = np.flatnonzero(at_bound)
-    active = []
-    for index in binding:
-        name = names[index] if index < len(prior) else names[len(prior) + (index - len(prior)) // 6]
-        if name and name not in active:
-            active.append(name)
-    return PhysicalFit(result, active)
+    stopped = (
+        ""
+        if stats["success"]
+        else f"IPOPT stopped ({stats['return_status']}, {stats['iter_count']} iterations)"
+    )
+    if float(np.min(np.asarray(result["g"]))) < -MINOR_TOLERANCE:
+        raise SpmOptError(
+            "identification: the physically constrained fit ended outside the constraints "
+            f"({stats['return_status']}); the logs may not excite the robot"
+        )
+    at_bound = -np.asarray(result["lam_x"]).ravel() > ACTIVE_MULTIPLIER
+    values[at_bound] = low[at_bound]  # the interior point stops just short of the bound
+    fitted = np.asarray(ca.Function("pi", [x], [standard])(values)).ravel()
+    bodies_held = np.any(
+        (-np.asarray(result["lam_g"]).ravel() > ACTIVE_MULTIPLIER).reshape(len(BODIES), -1), axis=1
+    )
+    names = _bound_names(file_structure)
+    active = [names[k] for k in np.flatnonzero(at_bound) if names[k]]
+    active += [
+        f"{body}: {_TRIANGLE_WORDS}" for body, on in zip(BODIES, bodies_held, strict=True) if on
+    ]
+    return PhysicalFit(fitted, active, stopped)
 
 
 def standard_estimate(robot: Robot, weighted: np.ndarray, rhs: np.ndarray) -> PhysicalFit:
@@ -206,34 +216,35 @@ def standard_estimate(robot: Robot, weighted: np.ndarray, rhs: np.ndarray) -> Ph
     constraints, in what a robot file holds (:func:`physical_fit` with a prior of
     :data:`PRIOR_SHARE`; module docstring), from the weighted rows of the standard regressor
     and their weighted torques ``rhs``, N·m."""
-    spread = prior_spread(standard_parameters(robot), products=PRODUCT_SPREAD)
+    spread = prior_spread(standard_parameters(robot))
     return physical_fit(robot, weighted, rhs, spread, 1.0, file_structure=True)
 
 
-def _second_moment(
-    body: str, standard: ca.SX, prior: np.ndarray
-) -> tuple[ca.SX, float, np.ndarray]:
-    """``body``'s Σ_c − δ·1 (3, 3) as an expression of π (Σ_c = ½ tr(I_c)·1 − I_c, positive
-    definite exactly where I_c's principal moments obey the triangle inequalities), the scale
-    of its entries (kg·m²) and the prior's scaled Cholesky factor (6,), its start."""
-    index = {ij: STANDARD_PARAMETERS.index(f"{body}.inertia.{ij}") for ij in INERTIA_ENTRIES}
+def _minors(body: str, standard: ca.SX, prior: np.ndarray) -> ca.SX:
+    """The 7 principal minors of ``body``'s (Σ_c − δ·1) / c, all ≥ 0 exactly where it is
+    positive semidefinite: Σ_c = ½ tr(I_c)·1 − I_c positive definite, I_c's principal moments
+    obeying the triangle inequalities (c the prior's largest principal moment, δ
+    :data:`PD_MARGIN` of it; I_c from π, ``standard``)."""
 
-    def tensor(values: Any) -> Any:
-        xx, yy, zz, xy, xz, yz = (values[index[ij]] for ij in INERTIA_ENTRIES)
-        rows = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]
-        return ca.blockcat(rows) if isinstance(values, ca.SX) else np.array(rows)
+    def tensor(values: ca.SX | np.ndarray) -> ca.SX:
+        xx, yy, zz, xy, xz, yz = (
+            values[STANDARD_PARAMETERS.index(f"{body}.inertia.{ij}")] for ij in INERTIA_ENTRIES
+        )
+        return ca.blockcat([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 
-    prior_inertia = tensor(prior)
-    largest = float(np.max(np.abs(np.linalg.eigvalsh(prior_inertia))))
-    scale = max(largest, INERTIA_SCALE_FLOOR)
-    margin = PD_MARGIN * scale
+    prior_moments = np.linalg.eigvalsh(np.array(ca.DM(tensor(prior))))
+    scale = max(float(np.max(np.abs(prior_moments))), INERTIA_SCALE_FLOOR)
     inertia = tensor(standard)
-    sigma = 0.5 * ca.trace(inertia) * ca.DM.eye(3) - inertia - margin * ca.DM.eye(3)
-    prior_sigma = 0.5 * np.trace(prior_inertia) * np.eye(3) - prior_inertia - margin * np.eye(3)
-    values, vectors = np.linalg.eigh(prior_sigma)
-    clipped = (vectors * np.maximum(values, 1e-3 * scale)) @ vectors.T
-    cholesky = np.linalg.cholesky(clipped / scale)
-    return sigma, scale, np.array([cholesky[i, j] for i, j in _TRIANGLE])
+    m = (0.5 * ca.trace(inertia) * ca.DM.eye(3) - inertia) / scale - PD_MARGIN * ca.DM.eye(3)
+    return ca.vertcat(
+        m[0, 0],
+        m[1, 1],
+        m[2, 2],
+        m[0, 0] * m[1, 1] - m[0, 1] ** 2,
+        m[0, 0] * m[2, 2] - m[0, 2] ** 2,
+        m[1, 1] * m[2, 2] - m[1, 2] ** 2,
+        ca.det(m),
+    )
 
 
 def _bound_names(file_structure: bool) -> list[str]:
@@ -252,15 +263,12 @@ def _bound_names(file_structure: bool) -> list[str]:
     return names
 
 
-def prior_spread(prior: np.ndarray, products: float | None = None) -> np.ndarray:
+def prior_spread(prior: np.ndarray) -> np.ndarray:
     """The prior's standard deviation s_k of each standard parameter (38,), SI:
-    :data:`PRIOR_SHARE` of its value or :data:`PRIOR_FLOOR`, the products of inertia
-    ``products`` (kg·m²; None: the inertias' floor)."""
+    :data:`PRIOR_SHARE` of its value or :data:`PRIOR_FLOOR` of its kind."""
     return np.array(
         [
-            products
-            if products is not None and _product_of_inertia(name)
-            else max(PRIOR_SHARE * abs(value), PRIOR_FLOOR[_kind(name)])
+            max(PRIOR_SHARE * abs(value), PRIOR_FLOOR[_kind(name)])
             for name, value in zip(STANDARD_PARAMETERS, prior, strict=True)
         ]
     )

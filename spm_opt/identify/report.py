@@ -46,7 +46,8 @@ def parameter_rows(identification: Identification, prior_robot: Robot) -> list[l
             if kept
             else "not seen by any motion: moved by the physical constraints"
         )
-        rows.append([name, f"{written[name]:.4g}", f"{priors[name]:.4g}", "no", why, unit(name)])
+        value, prior = written[name] + 0.0, priors[name] + 0.0  # no "-0"
+        rows.append([name, f"{value:.4g}", f"{prior:.4g}", "no", why, unit(name)])
     return rows
 
 
