@@ -1,7 +1,8 @@
 """The robot's base parameters and gear efficiency estimated from execution logs.
 
     spm-opt identify LOG.csv [LOG.csv ...] --problem P.toml --out identified.toml
-                     [--validate LOG.csv] [--cutoff-hz 2] [--decimation N] [--min-speed 0.02]
+                     [--holdout 0.2] [--validate LOG.csv] [--cutoff-hz 2] [--decimation N]
+                     [--min-speed 0.02]
 
 The identified robot's standard parameters come from :mod:`spm_opt.identify.physical_robot`;
 the robot file it writes (:mod:`spm_opt.identify.robot_file`) also carries each actuator's
@@ -31,8 +32,19 @@ correlated, :func:`~spm_opt.identify.samples.correlation_factor`: 2.0 to 2.5 mea
 without it the standard errors came out 1.4 to 1.5 times smaller than the estimates'
 scatter over repeated logs.
 
-A base parameter counts as identified when its 95 % interval, two standard errors, lies
-within 10 % of its value: each such estimate is within 10 % of the truth in 19 of 20 logs.
+The base parameters reported are physically consistent: β = K π of the standard parameters
+π closest to the weighted least squares under the physical constraints, with a negligible
+prior (:data:`PRIOR_WEIGHT`) to settle what the torques leave open
+(:func:`~spm_opt.identify.physical_robot.physical_fit`). Where a constraint binds, the
+estimate moves off the unconstrained one; the standard errors stay those of the
+unconstrained weighted least squares. A parameter the constraints hold at its bound
+(:attr:`Identification.at_bound`), or move by more than :data:`MOVED_SIGMAS` standard errors,
+is not identified, and :meth:`Identification.reasons` says so, with how many standard errors
+the unconstrained estimate lay beyond the bound.
+
+A base parameter counts as identified when, besides, its 95 % interval, two standard errors,
+lies within 10 % of its value: each such estimate is within 10 % of the truth in 19 of 20
+logs (measured before the constraints).
 (With the usual rule, one standard error within 10 %, three of six simulated logs had an
 identified parameter beyond 10 % of the truth, though within 2.3 of its standard errors:
 the errors are honest, the rule too loose for its 10 %.) η counts as identified when its
@@ -45,7 +57,8 @@ the load never drives a motor back (the loss then only scales β), it keeps η =
 losses show as friction. The condition number is that of W̃ with its columns scaled to
 unit norm.
 
-Measured on the simulated robot whose plant is ``prototype_plant.toml`` (a 120 s
+Measured, before the constraints, on the simulated robot whose plant is
+``prototype_plant.toml`` (a 120 s
 excitation and a 30 s validation run at 500 Hz, ``tests/test_identify.py``, goals equal
 to the plan: before the executor led them): η = 0.873 ±
 0.016 against the plant's 0.85; the two base parameters identified, the joints' viscous
@@ -242,7 +255,7 @@ class Identification:
             elif self.moved[k]:
                 words.append(
                     f"moved {abs(self.shift_sigmas[k]):.1f} s.e. by the physical constraints "
-                    "active (below the table)"
+                    "that bind (listed with the table)"
                 )
             elif self.identified[k]:
                 words.append(f"2 s.e. within 10 % ({100 * share[k]:.2g} %){moved}")
