@@ -17,7 +17,7 @@ from test_identify import ROBOTS, _log, synthetic_samples, with_efficiency
 from spm_opt.identify.estimate import identify
 from spm_opt.identify.report import report_markdown
 from spm_opt.identify.robot_file import robot_file_text
-from spm_opt.identify.validate import hold_out, prediction_rms
+from spm_opt.identify.validate import hold_out, joined, prediction_rms
 from spm_opt.model import dynamics
 from spm_opt.model.params import Robot, load_robot
 from spm_opt.model.regressor import BODIES
@@ -103,7 +103,7 @@ def _grid(robot: Robot, points: int = 9) -> np.ndarray:
     return np.array(list(itertools.product(*axes)))
 
 
-def test_torques_that_would_make_an_inertia_indefinite_give_a_physical_robot():
+def test_torques_that_would_make_an_inertia_indefinite_give_a_physical_robot(tmp_path):
     # torques of a plant whose lower arc's inertia about its axis is negative, as noise or a
     # bias could make it look: its mass matrix is indefinite over part of the joint range
     prior = load_robot(ROBOTS / "prototype.toml")
@@ -116,7 +116,9 @@ def test_torques_that_would_make_an_inertia_indefinite_give_a_physical_robot():
     grid = _grid(prior)
     assert np.min(np.linalg.eigvalsh(dynamics.mass_matrix(plant, grid))) < 0.0
     identification = identify(prior, synthetic_samples(plant, seed=1, duration_s=30.0))
-    robot = identification.robot
+    path = tmp_path / "identified.toml"  # the robot as written, read back
+    path.write_text(robot_file_text(identification, PriorLoops(), "identified"), encoding="utf-8")
+    robot = load_robot(path)
     for body in BODIES:
         assert getattr(robot, body).mass > 0.0, body
         assert _triangle_ok(getattr(robot, body).inertia), body
@@ -182,3 +184,13 @@ def test_a_bad_holdout_is_a_one_line_error(value, tmp_path, capsys):
     status, shown = run_cli([*argv, "--holdout", value])
     assert_one_error(status, capsys.readouterr().err, (f"--holdout {value}",), tmp_path, shown)
     assert not out.parent.exists()
+
+
+def test_logs_joined_filter_as_each_alone():
+    robot = load_robot(ROBOTS / "prototype.toml")
+    parts = [synthetic_samples(robot, seed=seed, duration_s=10.0) for seed in (0, 1)]
+    both = joined(parts)
+    assert both.duration_s == pytest.approx(sum(part.duration_s for part in parts))
+    np.testing.assert_array_equal(
+        both.parallel(both.torque), np.concatenate([part.parallel(part.torque) for part in parts])
+    )

@@ -82,6 +82,9 @@ ACTIVE_MULTIPLIER = 1e-2
 prior standard deviation (a body's minors by one unit) would lower the objective, in
 squared weighted residuals, by that much (a bound that does not bind has only the interior
 point's barrier multiplier, μ / distance)."""
+MU_LIMIT = 2.0
+"""The largest rail friction coefficient a robot file holds
+(:func:`~spm_opt.model.params.load_robot`)."""
 _MU_SPREAD = 0.05
 """The scale of the rails' friction coefficient μ in the robot file's fit (1)."""
 _TRIANGLE_WORDS = "inertia's principal moments on a triangle inequality (I_c > 0)"
@@ -162,6 +165,7 @@ def physical_fit(
     if file_structure:
         mu = robot.friction.mu + _MU_SPREAD * x[_RAILS[0]]
         low[_RAILS[0]] = -robot.friction.mu / _MU_SPREAD
+        high[_RAILS[0]] = (MU_LIMIT - robot.friction.mu) / _MU_SPREAD
         entries[_RAILS[0]] = mu * (free[_UPPER_MASS] + robot.payload.mass)
         entries[_RAILS[1]] = mu * free[_LOWER_MASS]
         entries[_ROTOR[1]] = free[_ROTOR[0]]
@@ -197,14 +201,21 @@ def physical_fit(
             "identification: the physically constrained fit ended outside the constraints "
             f"({stats['return_status']}); the logs may not excite the robot"
         )
-    at_bound = -np.asarray(result["lam_x"]).ravel() > ACTIVE_MULTIPLIER
+    multipliers = np.asarray(result["lam_x"]).ravel()
+    free_slots = low < high  # a variable fixed at the prior's has its gradient as multiplier
+    at_bound = free_slots & (-multipliers > ACTIVE_MULTIPLIER)
+    at_top = free_slots & (multipliers > ACTIVE_MULTIPLIER)
     values[at_bound] = low[at_bound]  # the interior point stops just short of the bound
+    values[at_top] = high[at_top]
     fitted = np.asarray(ca.Function("pi", [x], [standard])(values)).ravel()
     bodies_held = np.any(
         (-np.asarray(result["lam_g"]).ravel() > ACTIVE_MULTIPLIER).reshape(len(BODIES), -1), axis=1
     )
     names = _bound_names(file_structure)
     active = [names[k] for k in np.flatnonzero(at_bound) if names[k]]
+    active += [
+        f"friction.mu <= {MU_LIMIT:g} (a robot file's limit)" for _ in np.flatnonzero(at_top)
+    ]
     active += [
         f"{body}: {_TRIANGLE_WORDS}" for body, on in zip(BODIES, bodies_held, strict=True) if on
     ]
