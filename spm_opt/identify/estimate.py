@@ -261,12 +261,12 @@ class Identification:
                 words.append(f"2 s.e. within 10 % ({100 * share[k]:.2g} %){moved}")
             elif not np.isfinite(share[k]) or seconds[k] > LIVELIER * self.duration_s:
                 words.append(
-                    f"2 s.e. are {_percent(share[k])} of it: its torques are below the noise, "
+                    f"2 s.e. are {_share(share[k])} it: its torques are below the noise, "
                     f"a livelier motion shows it{moved}"
                 )
             else:
                 more = seconds[k] - self.duration_s
-                words.append(f"2 s.e. are {_percent(share[k])} of it: log {more:.3g} s more{moved}")
+                words.append(f"2 s.e. are {_share(share[k])} it: log {more:.3g} s more{moved}")
         return words
 
     def base_rows(self) -> list[tuple[str, str, float, float, float, bool]]:
@@ -307,9 +307,12 @@ class Identification:
         return float(_seconds(self.duration_s, np.array([self.efficiency_error]), loss)[0])
 
 
-def _percent(share: float) -> str:
-    """A share as a percentage for a reason, 'all' where infinite."""
-    return f"{100 * share:.3g} %" if np.isfinite(share) else "infinitely many times"
+def _share(share: float) -> str:
+    """Two standard errors' share of an estimate in words: "40 % of", "1.2e+03 times" (from
+    10 times on)."""
+    if not np.isfinite(share):
+        return "not within any multiple of"
+    return f"{100 * share:.3g} % of" if share < 10.0 else f"{share:.2g} times"
 
 
 def _seconds(duration_s: float, errors: np.ndarray, values: np.ndarray) -> np.ndarray:
