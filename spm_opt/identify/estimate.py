@@ -255,7 +255,7 @@ class Identification:
             elif self.moved[k]:
                 words.append(
                     f"moved {abs(self.shift_sigmas[k]):.1f} s.e. by the physical constraints "
-                    "that bind (listed with the table)"
+                    "that bind"
                 )
             elif self.identified[k]:
                 words.append(f"2 s.e. within 10 % ({100 * share[k]:.2g} %){moved}")
