@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from test_identify import ROBOTS, _log, synthetic_samples, with_efficiency
 from spm_opt.identify.estimate import identify
 from spm_opt.identify.report import report_markdown
 from spm_opt.identify.robot_file import robot_file_text
-from spm_opt.identify.validate import hold_out, joined, prediction_rms
+from spm_opt.identify.validate import hold_out, joined, plan_period, prediction_rms
 from spm_opt.model import dynamics
 from spm_opt.model.params import Robot, load_robot
 from spm_opt.model.regressor import BODIES
@@ -194,3 +195,14 @@ def test_logs_joined_filter_as_each_alone():
     np.testing.assert_array_equal(
         both.parallel(both.torque), np.concatenate([part.parallel(part.torque) for part in parts])
     )
+
+
+def test_a_log_s_header_gives_its_plan_s_period(tmp_path):
+    log = tmp_path / "log.csv"
+    header = log.with_suffix(".json")
+    assert plan_period(log) is None  # no header
+    header.write_text(json.dumps({"plan": {"planner": "cubic"}, "plan_duration_s": 40.0}))
+    assert plan_period(log) is None  # not periodic
+    plan = {"planner": "excitation", "excitation": {"period_s": 10.0, "periods": 12}}
+    header.write_text(json.dumps({"plan": plan, "plan_duration_s": 120.0}))
+    assert plan_period(log) == (10.0, 120.0)
