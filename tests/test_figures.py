@@ -26,6 +26,7 @@ from test_identify import synthetic_samples, with_efficiency
 
 import spm_opt as so
 from spm_opt.identify.report import prediction_figure
+from spm_opt.identify.validate import hold_out
 from spm_opt.judge.limits import contour_tube
 from spm_opt.model import dynamics, kinematics
 from spm_opt.model.params import DEG, MM
@@ -476,12 +477,15 @@ def test_the_executed_cut_figure_shows_the_distance_along_the_plans_cut() -> Non
 
 def test_the_identification_figure_is_over_time_with_a_title(tmp_path: Path) -> None:
     robot = so.load_problem(ROOT / "problems" / "craniotomy_hardware.toml").robot
-    samples = synthetic_samples(robot, seed=0, duration_s=20.0)
-    figure = prediction_figure(robot, with_efficiency(robot, 0.9), samples)
+    fitted, held = hold_out(synthetic_samples(robot, seed=0, duration_s=20.0), 0.2)
+    assert held is not None
+    figure = prediction_figure(robot, with_efficiency(robot, 0.9), [(fitted, False), (held, True)])
     assert figure.get_suptitle().startswith("Torque prediction")
-    assert figure.axes[1].get_xlabel() == "time while both joints move (s)"
-    end = figure.axes[0].lines[0].get_xdata()[-1]
-    assert 10.0 < end <= 20.0  # seconds of the 20 s log, not samples
+    assert figure.axes[1].get_xlabel() == "time (s)"
+    end = np.nanmax(figure.axes[0].lines[0].get_xdata())
+    assert 19.0 < end <= 20.0  # seconds of the 20 s log, not samples
+    (shaded,) = figure.axes[0].patches  # the held-out last 4 s
+    assert shaded.get_x() == pytest.approx(16.0, abs=0.2)
     (tmp_path / "identified.png").write_bytes(to_png(figure))
 
 

@@ -315,31 +315,58 @@ def _identify(args: argparse.Namespace) -> None:
     from spm_opt.identify.loop import estimate_loops, goal_rms
     from spm_opt.identify.report import prediction_figure, report_markdown
     from spm_opt.identify.robot_file import robot_file_text
-    from spm_opt.identify.samples import log_samples
-    from spm_opt.identify.validate import prediction_rms
+    from spm_opt.identify.samples import check_log_rows, log_samples
+    from spm_opt.identify.validate import (
+        check_holdout,
+        hold_out,
+        joined,
+        plan_period,
+        prediction_rms,
+    )
     from spm_opt.problem.problem import load_problem
     from spm_opt.report.plots import to_png
 
     if args.out.suffix != ".toml":
         raise InputError(f"--out {args.out}: expected a robot file name ending in .toml")
+    check_holdout(args.holdout)
     check_output_file(args.out, "--out")
     problem = load_problem(args.problem)
-    settings = (args.cutoff_hz, args.decimation, args.min_speed)
-    samples = log_samples(args.logs, *settings)
-    validation = samples if args.validate is None else log_samples([args.validate], *settings)
-    _LOG.info("identify: %d samples from %d logs; fitting", len(samples.q), len(args.logs))
-    identification = identify(problem.robot, samples)
+    check_log_rows(args.logs)
+    decimation, stretches = args.decimation, []
+    for path in args.logs:
+        samples = log_samples([path], args.cutoff_hz, decimation, args.min_speed)
+        decimation = samples.decimation  # every log's as the first's
+        fitted, held = hold_out(samples, args.holdout, plan_period(path))
+        stretches += [(fitted, False)] + ([(held, True)] if held is not None else [])
+    fit = joined([part for part, held in stretches if not held])
+    held_parts = [part for part, held in stretches if held]
+    _LOG.info("identify: %d samples from %d logs; fitting", len(fit.q), len(args.logs))
+    identification = identify(problem.robot, fit)
     loops = estimate_loops(args.logs, problem.robot)
+    checked = [(f"fitted ({fit.duration_s:.1f} s)", fit)]
+    if held_parts:
+        held = joined(held_parts)
+        if len(held) == 0:
+            raise InputError(
+                f"--holdout {args.holdout:g}: the held-out stretches have no sample where both "
+                "joints move; hold out more, or 0"
+            )
+        checked.append((f"held out ({held.duration_s:.1f} s, not fitted)", held))
+    if args.validate is not None:
+        validation = log_samples([args.validate], args.cutoff_hz, decimation, args.min_speed)
+        checked.append((f"{args.validate.name} (not fitted)", validation))
+    predictions = [
+        (label, prediction_rms(problem.robot, part), prediction_rms(identification.robot, part))
+        for label, part in checked
+    ]
+    figure = prediction_figure(problem.robot, identification.robot, stretches)
     on = "the fitted logs" if args.validate is None else f"{args.validate.name} (not fitted)"
-    prior = prediction_rms(problem.robot, validation)
-    identified = prediction_rms(identification.robot, validation)
-    figure = prediction_figure(problem.robot, identification.robot, validation)
     goal_logs = args.logs if args.validate is None else [args.validate]
     goals = [goal_rms(goal_logs, robot) for robot in (problem.robot, loops.robot(problem.robot))]
     actuator = problem.robot.actuator
     unit = actuator.current_unit_a  # one Present Current unit, A
     report = report_markdown(
-        identification, prior, identified, on, float(actuator.current_map.torque(unit))
+        identification, problem.robot, predictions, float(actuator.current_map.torque(unit))
     )
     files = {
         args.out: robot_file_text(identification, loops, args.out.stem),
@@ -349,11 +376,12 @@ def _identify(args: argparse.Namespace) -> None:
     write_atomically(files)
     for path in files:
         print(path)
-    print(
-        f"torque prediction RMS on {on}: prior {prior[0]:.4f}, {prior[1]:.4f} N·m; "
-        f"identified {identified[0]:.4f}, {identified[1]:.4f} N·m",
-        file=sys.stderr,
-    )
+    for label, prior, identified in predictions:
+        print(
+            f"torque prediction RMS, {label}: prior {prior[0]:.4f}, {prior[1]:.4f} N·m; "
+            f"identified {identified[0]:.4f}, {identified[1]:.4f} N·m",
+            file=sys.stderr,
+        )
     print(loops.summary(), file=sys.stderr)
 
 

@@ -259,7 +259,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--validate",
         type=Path,
         metavar="LOG",
-        help="judge the fit on this log, not used for it (default: on the fitted logs)",
+        help="judge the fit on this log too, not used for it (default: on the fitted "
+        "samples and the held-out stretches)",
+    )
+    identify.add_argument(
+        "--holdout",
+        type=float,
+        default=0.2,
+        metavar="FRACTION",
+        help="share of each log kept out of the fit, its end (whole periods of a periodic "
+        "plan), on which the torque prediction is judged, 0 to 0.5 (default 0.2; 0: fit all)",
     )
     identify.add_argument(
         "--cutoff-hz",

@@ -1,21 +1,35 @@
-"""The identified robot: the standard parameters closest to the prior's under physical bounds.
+"""Standard parameters fitted under physical constraints: the base parameters' physically
+consistent estimate, and the identified robot.
 
-The robot file is the estimate of the standard parameters π closest to the problem's robot,
-at the η it carries (:func:`spm_opt.identify.estimate.identify`): the weighted rows and, for
-each parameter, a row (π_k − prior_k) / s_k
-with s_k half the prior's value (or a floor per kind of parameter; the products of inertia
-kept): a prior of 50 % uncertainty that settles what the logs leave open, solved under the
-physical bounds (masses, diagonal inertias, friction and rotor inertia not negative) with
-``scipy.optimize.lsq_linear``, in what a robot file holds: one rotor inertia for both
-joints and one rail friction coefficient μ, φ_u = μ (m_u + m_payload) and φ_L = μ m_L.
-These are bilinear in μ and the masses, so the linear solve at the prior's masses starts
-``scipy.optimize.least_squares`` over all of them at once. Solving again at the last
-solution's masses until they settled instead (a fixed point that ignores how the rails'
-rows pull on the masses) drifted to m_u = 0 and μ = 0.07 on four of eight emulator logs
-of a plant equal to the model (μ 0.24), and that file predicted the torques worse than the
-model; the joint solve gave m_u 0.087–0.095 kg (0.0878) and μ 0.16–0.24 on all eight.
-Splitting a free fit's two rails into one μ afterwards, the other parameters
-fitted to the split they had, made the validation error two to three times larger. The
+Physical consistency (Wensing, Kim and Slotine, RA-L 2017; Sousa and Cortesão, IJRR 2014):
+each body's mass at least :data:`MASS_FLOOR` of the prior's (a mass > 0); its inertia about
+its mass centre I_c positive definite with its principal moments obeying the triangle
+inequalities, which is Σ_c = ½ tr(I_c)·1 − I_c positive definite (the pseudo-inertia's
+second moment with the mass centre fixed, as the model fixes it: Rucker and Wensing,
+RA-L 2022), asked as Σ_c − δ·1 positive semidefinite, δ :data:`PD_MARGIN` of the prior's
+largest moment: its seven principal minors ≥ 0 (CasADi has no semidefinite solver; the
+minors are smooth constraints IPOPT takes, and a body whose minors bind has a triangle
+inequality holding with equality); friction and rotor inertia ≥ 0. :func:`physical_fit`
+minimises the weighted torques' misfit plus a Gaussian prior on π under these constraints
+with CasADi + IPOPT, and says which constraints hold the solution back. (Two other forms
+were tried on synthetic torques: Σ_c − δ·1 = L Lᵀ as equality constraints left IPOPT's
+restoration phase failing with 1e-4 N·m of noise, and π's inertias as functions of a
+Cholesky or L D Lᵀ factor with bounds alone crawled for thousands of iterations on a 32 s
+log; the minors converged in 30 to 80.)
+
+:func:`~spm_opt.identify.estimate.identify` calls it twice. With a negligible prior
+(:data:`~spm_opt.identify.estimate.PRIOR_WEIGHT`), its π gives the base parameters'
+physically consistent estimate β = K π; what the torques leave open (the standard
+parameters no motion shows, the splits of a combination) the prior settles. For the robot
+file (:func:`standard_estimate`), with the prior at its weight 1 and a standard deviation of
+:data:`PRIOR_SHARE` of each prior value (or a floor per kind of parameter), the products of
+inertia held at the prior's (a few-mm offset of a 0.1 kg body makes ~1e-5 kg·m², far below
+what current-based torques resolve), in what a robot file holds: one rotor inertia for both
+joints and one rail friction coefficient μ, φ_u = μ (m_u + m_payload) and φ_L = μ m_L,
+bilinear in μ and the masses, all solved at once. (With the earlier scipy solve, fixing the
+masses and solving again until they settled drifted to m_u = 0 and μ = 0.07 on four of eight
+emulator logs of a plant equal to the model, whose μ is 0.24; solving for the masses and μ
+together gave m_u 0.087–0.095 kg, 0.0878 in the model, and μ 0.16–0.24 on all eight.) The
 drives' offsets, which the robot file cannot hold, are in its comments
 (:mod:`spm_opt.identify.robot_file`).
 """
@@ -23,9 +37,10 @@ drives' offsets, which the robot file cannot hold, are in its comments
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
-import scipy.optimize
 
 from spm_opt.base.errors import SpmOptError
 from spm_opt.model.params import Robot
@@ -48,11 +63,43 @@ PRIOR_FLOOR = {
     "offset": 0.05,
 }
 """The prior's standard deviation where the prior value is small, per kind (SI)."""
-PRODUCT_SPREAD = 1e-9
-"""The prior's standard deviation of the products of inertia, kg·m²: kept at the prior's
-(a few-mm offset of a 0.1 kg body makes ~1e-5 kg·m², far below what current-based torques
-resolve)."""
 _NOT_NEGATIVE = ("mass", "rail_friction", "rotor_inertia", "viscous_friction", "coulomb_friction")
+MASS_FLOOR = 1e-3
+"""A body's mass is at least this share of the prior's (masses > 0)."""
+PD_MARGIN = 1e-6
+"""Σ_c − δ·1 is positive semidefinite with δ this share of the prior body's largest principal
+moment: its inertia positive definite, the triangle inequalities strict. The prototype's
+upper arc, nearly flat, has Σ_c's smallest eigenvalue 1.7e-5 of its largest moment."""
+MINOR_TOLERANCE = 1e-9
+"""A body's principal minor (in units of its prior's largest moment) below 0 by at most this
+is the interior point's round-off; further below, the fit failed."""
+RANK_TOLERANCE = 1e-10
+"""Singular values of the weighted rows below this share of the largest are round-off."""
+INERTIA_SCALE_FLOOR = 1e-9
+"""The scale of a body's inertia (kg·m²) where the prior's is smaller."""
+ACTIVE_MULTIPLIER = 1e-2
+"""A bound holds the solution back when its multiplier is above this: relaxing it by one
+prior standard deviation (a body's minors by one unit) would lower the objective, in
+squared weighted residuals, by that much (a bound that does not bind has only the interior
+point's barrier multiplier, μ / distance)."""
+MU_LIMIT = 2.0
+"""The largest rail friction coefficient a robot file holds
+(:func:`~spm_opt.model.params.load_robot`)."""
+_MU_SPREAD = 0.05
+"""The scale of the rails' friction coefficient μ in the robot file's fit (1)."""
+_TRIANGLE_WORDS = "inertia's principal moments on a triangle inequality (I_c > 0)"
+_IPOPT = {
+    "print_level": 0,
+    "sb": "yes",
+    "tol": 1e-9,
+    "acceptable_tol": 1e-5,
+    "acceptable_iter": 5,
+    "max_iter": 1000,
+    "bound_relax_factor": 0.0,
+}
+"""IPOPT's settings: bounds kept exactly; five iterations in a row within 1e-5 suffice (a
+synthetic log's fit converged to 6e-6 and then stalled in its line search, and IPOPT's
+restoration phase left it worse)."""
 _UPPER_MASS = STANDARD_PARAMETERS.index("upper_platform.mass")
 _LOWER_MASS = STANDARD_PARAMETERS.index("lower_platform.mass")
 _RAILS = (
@@ -65,83 +112,202 @@ _ROTOR = (
 )
 INERTIA_ROUND_OFF = 1e-6
 """A body's inertia eigenvalue below 0 by at most this share of its largest is round-off of
-the bounded solve (a flat body's smallest is 0), set to 0; further below, an error."""
+the constrained solve, set to 0; further below, an error."""
 
 
-def standard_estimate(robot: Robot, weighted: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """π (38,) closest to the prior robot's under the physical bounds, in what a robot file
-    holds (:func:`_file_basis`; module docstring), from the weighted rows of the standard
-    regressor (both joints' rows stacked, each divided by its joint's residual standard
-    deviation) and their weighted torques ``rhs``, N·m."""
+@dataclass(frozen=True)
+class PhysicalFit:
+    """Standard parameters fitted under the physical constraints.
+
+    Attributes
+    ----------
+    standard : ndarray, shape (38,)
+        π (:data:`STANDARD_PARAMETERS`), SI.
+    active : list of str
+        The constraints that hold π back at the solution, in words (e.g.
+        ``viscous_friction.theta1 >= 0``, ``upper_arc: inertia's triangle inequality``).
+    stopped : str
+        "" when IPOPT converged; otherwise why it stopped (π is physical, checked, if perhaps
+        not the closest fit).
+    """
+
+    standard: np.ndarray
+    active: list[str]
+    stopped: str
+
+
+def physical_fit(
+    robot: Robot,
+    weighted: np.ndarray,
+    rhs: np.ndarray,
+    spread: np.ndarray,
+    prior_weight: float,
+    file_structure: bool,
+) -> PhysicalFit:
+    """π (38,) minimising ‖weighted π − rhs‖² + w ‖(π − prior) / spread‖² under the physical
+    constraints (module docstring) by CasADi + IPOPT: ``weighted`` the rows of the
+    standard regressor (both joints' rows, each divided by its joint's residual standard
+    deviation), ``rhs`` their weighted torques, N·m, ``spread`` the prior's standard
+    deviation of each parameter (38,), SI, w ``prior_weight``; with ``file_structure``, in
+    what a robot file holds (one rotor inertia, one rail friction coefficient μ)."""
     prior = standard_parameters(robot)
-    spread = _prior_spread(prior)
-    a = np.vstack([weighted, np.diag(1.0 / spread)])
-    b = np.concatenate([rhs, prior / spread])
-    low = _lower_bounds()
-    masses = (robot.upper_platform.mass, robot.lower_platform.mass)
-    basis, kept = _file_basis(masses, robot.payload.mass)
-    start = scipy.optimize.lsq_linear(a @ basis, b, bounds=(low[kept], np.inf)).x
-    at = {index: k for k, index in enumerate(kept)}
-    upper, lower, mu = at[_UPPER_MASS], at[_LOWER_MASS], at[_RAILS[0]]
-
-    def file_basis(z: np.ndarray) -> np.ndarray:
-        return _file_basis((z[upper], z[lower]), robot.payload.mass)[0]
-
-    def jacobian(z: np.ndarray) -> np.ndarray:
-        d_standard = file_basis(z)  # π = N(m) z, and the rails' rows μ m also move with m
-        d_standard[_RAILS[0], upper] += z[mu]
-        d_standard[_RAILS[1], lower] += z[mu]
-        return a @ d_standard
-
-    solution = scipy.optimize.least_squares(
-        lambda z: a @ (file_basis(z) @ z) - b,
-        start,
-        jac=jacobian,
-        bounds=(low[kept], np.inf),
-        x_scale="jac",
+    # the misfit as ‖F (π − π_ls)‖² about a least-squares solution π_ls, F from the
+    # weighted rows' singular values above round-off: a sum of squares, never below 0
+    _, singular, right = np.linalg.svd(weighted, full_matrices=False)
+    kept = singular > RANK_TOLERANCE * singular[0]
+    factor_rows = singular[kept, None] * right[kept]
+    solution_ls = np.linalg.lstsq(weighted, rhs, rcond=None)[0]
+    x = ca.SX.sym("x", len(prior))  # π = prior + spread x (μ in the upper rail's slot)
+    free = prior + spread * x
+    entries = [free[k] for k in range(len(prior))]
+    low = (_lower_bounds(prior) - prior) / spread
+    high = np.full(len(prior), np.inf)
+    if file_structure:
+        mu = robot.friction.mu + _MU_SPREAD * x[_RAILS[0]]
+        low[_RAILS[0]] = -robot.friction.mu / _MU_SPREAD
+        high[_RAILS[0]] = (MU_LIMIT - robot.friction.mu) / _MU_SPREAD
+        entries[_RAILS[0]] = mu * (free[_UPPER_MASS] + robot.payload.mass)
+        entries[_RAILS[1]] = mu * free[_LOWER_MASS]
+        entries[_ROTOR[1]] = free[_ROTOR[0]]
+        held = [k for k, name in enumerate(STANDARD_PARAMETERS) if _product_of_inertia(name)]
+        for tied in (_RAILS[1], _ROTOR[1], *held):  # the products of inertia the prior's
+            low[tied] = high[tied] = 0.0
+    standard = ca.vertcat(*entries)
+    deviation = (standard - prior) / spread
+    offset = standard - solution_ls
+    misfit = ca.mtimes(ca.DM(factor_rows), offset)
+    objective = ca.dot(misfit, misfit) + prior_weight * ca.dot(deviation, deviation)
+    minors = ca.vertcat(*(_minors(body, standard, prior) for body in BODIES))
+    solver = ca.nlpsol(
+        "physical_fit",
+        "ipopt",
+        {"x": x, "f": objective, "g": minors},
+        {"ipopt": _IPOPT, "print_time": False},
     )
-    return file_basis(solution.x) @ solution.x
+    result = solver(x0=np.zeros(len(prior)), lbx=low, ubx=high, lbg=0.0, ubg=np.inf)
+    values = np.asarray(result["x"]).ravel()
+    stats = solver.stats()
+    if not np.all(np.isfinite(values)):
+        raise SpmOptError(
+            f"identification: the physically constrained fit failed ({stats['return_status']})"
+        )
+    stopped = (
+        ""
+        if stats["success"]
+        else f"IPOPT stopped ({stats['return_status']}, {stats['iter_count']} iterations)"
+    )
+    if float(np.min(np.asarray(result["g"]))) < -MINOR_TOLERANCE:
+        raise SpmOptError(
+            "identification: the physically constrained fit ended outside the constraints "
+            f"({stats['return_status']}); the logs may not excite the robot"
+        )
+    multipliers = np.asarray(result["lam_x"]).ravel()
+    free_slots = low < high  # a variable fixed at the prior's has its gradient as multiplier
+    at_bound = free_slots & (-multipliers > ACTIVE_MULTIPLIER)
+    at_top = free_slots & (multipliers > ACTIVE_MULTIPLIER)
+    values[at_bound] = low[at_bound]  # the interior point stops just short of the bound
+    values[at_top] = high[at_top]
+    fitted = np.asarray(ca.Function("pi", [x], [standard])(values)).ravel()
+    bodies_held = np.any(
+        (-np.asarray(result["lam_g"]).ravel() > ACTIVE_MULTIPLIER).reshape(len(BODIES), -1), axis=1
+    )
+    names = _bound_names(file_structure)
+    active = [names[k] for k in np.flatnonzero(at_bound) if names[k]]
+    active += [
+        f"friction.mu <= {MU_LIMIT:g} (a robot file's limit)" for _ in np.flatnonzero(at_top)
+    ]
+    active += [
+        f"{body}: {_TRIANGLE_WORDS}" for body, on in zip(BODIES, bodies_held, strict=True) if on
+    ]
+    return PhysicalFit(fitted, active, stopped)
 
 
-def _prior_spread(prior: np.ndarray) -> np.ndarray:
-    """The prior's standard deviation s_k of each standard parameter (38,), SI."""
+def standard_estimate(robot: Robot, weighted: np.ndarray, rhs: np.ndarray) -> PhysicalFit:
+    """The robot file's π (38,): the fit closest to the prior robot's under the physical
+    constraints, in what a robot file holds (:func:`physical_fit` with a prior of
+    :data:`PRIOR_SHARE`; module docstring), from the weighted rows of the standard regressor
+    and their weighted torques ``rhs``, N·m."""
+    spread = prior_spread(standard_parameters(robot))
+    return physical_fit(robot, weighted, rhs, spread, 1.0, file_structure=True)
+
+
+def _minors(body: str, standard: ca.SX, prior: np.ndarray) -> ca.SX:
+    """The 7 principal minors of ``body``'s (Σ_c − δ·1) / c, all ≥ 0 exactly where it is
+    positive semidefinite: Σ_c = ½ tr(I_c)·1 − I_c positive definite, I_c's principal moments
+    obeying the triangle inequalities (c the prior's largest principal moment, δ
+    :data:`PD_MARGIN` of it; I_c from π, ``standard``)."""
+
+    def tensor(values: ca.SX | np.ndarray) -> ca.SX:
+        xx, yy, zz, xy, xz, yz = (
+            values[STANDARD_PARAMETERS.index(f"{body}.inertia.{ij}")] for ij in INERTIA_ENTRIES
+        )
+        return ca.blockcat([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+    prior_moments = np.linalg.eigvalsh(np.array(ca.DM(tensor(prior))))
+    scale = max(float(np.max(np.abs(prior_moments))), INERTIA_SCALE_FLOOR)
+    inertia = tensor(standard)
+    m = (0.5 * ca.trace(inertia) * ca.DM.eye(3) - inertia) / scale - PD_MARGIN * ca.DM.eye(3)
+    return ca.vertcat(
+        m[0, 0],
+        m[1, 1],
+        m[2, 2],
+        m[0, 0] * m[1, 1] - m[0, 1] ** 2,
+        m[0, 0] * m[2, 2] - m[0, 2] ** 2,
+        m[1, 1] * m[2, 2] - m[1, 2] ** 2,
+        ca.det(m),
+    )
+
+
+def _bound_names(file_structure: bool) -> list[str]:
+    """The constraint each entry of x's lower bound stands for, in words ("" for none)."""
+    names = []
+    for k, name in enumerate(STANDARD_PARAMETERS):
+        bounded = _kind(name) in _NOT_NEGATIVE
+        if file_structure and k == _RAILS[0]:
+            names.append("friction.mu >= 0")
+        elif file_structure and k in (_RAILS[1], _ROTOR[1]):
+            names.append("")
+        elif bounded:
+            names.append(f"{name} {'> 0' if _kind(name) == 'mass' else '>= 0'}")
+        else:
+            names.append("")
+    return names
+
+
+def prior_spread(prior: np.ndarray) -> np.ndarray:
+    """The prior's standard deviation s_k of each standard parameter (38,), SI:
+    :data:`PRIOR_SHARE` of its value or :data:`PRIOR_FLOOR` of its kind."""
     return np.array(
         [
-            PRODUCT_SPREAD
-            if _product_of_inertia(name)
-            else max(PRIOR_SHARE * abs(value), PRIOR_FLOOR[_kind(name)])
+            max(PRIOR_SHARE * abs(value), PRIOR_FLOOR[_kind(name)])
             for name, value in zip(STANDARD_PARAMETERS, prior, strict=True)
         ]
     )
 
 
-def _lower_bounds() -> np.ndarray:
-    """The physical lower bound of each standard parameter (38,): 0 for masses, diagonal
-    inertias, friction and rotor inertia, −inf for the others."""
+def _lower_bounds(prior: np.ndarray) -> np.ndarray:
+    """The lower bound of each standard parameter (38,): :data:`MASS_FLOOR` of the prior's
+    for masses, 0 for friction and rotor inertia, −inf for the others (the inertias are
+    bounded by their triangle inequalities)."""
     return np.array(
         [
-            0.0 if _kind(n) in _NOT_NEGATIVE or _diagonal_inertia(n) else -np.inf
-            for n in STANDARD_PARAMETERS
+            MASS_FLOOR * value
+            if _kind(name) == "mass"
+            else (0.0 if _kind(name) in _NOT_NEGATIVE else -np.inf)
+            for name, value in zip(STANDARD_PARAMETERS, prior, strict=True)
         ]
     )
+
+
+def not_negative(name: str) -> bool:
+    """Whether the physical constraints keep the standard parameter ``name`` ≥ 0: a mass,
+    friction, a rotor inertia or a diagonal entry of an inertia (positive definite)."""
+    return _kind(name) in _NOT_NEGATIVE or _diagonal_inertia(name)
 
 
 def _kind(name: str) -> str:
     parts = name.split(".")
     return parts[1] if parts[0] in BODIES else parts[0]
-
-
-def _file_basis(masses: tuple[float, float], payload_kg: float) -> tuple[np.ndarray, np.ndarray]:
-    """N (38, 36), π = N z, and the indices of π that z keeps: what a robot file holds,
-    one rotor inertia for both joints and the rails' friction from one μ (φ_u = μ (m_u +
-    m_payload), φ_L = μ m_L at the platforms' ``masses`` m_u, m_L, kg), z's entries of
-    those μ and J, the others π's."""
-    basis = np.eye(len(STANDARD_PARAMETERS))
-    basis[_ROTOR[1], _ROTOR[0]] = 1.0
-    basis[_RAILS[0], _RAILS[0]] = masses[0] + payload_kg
-    basis[_RAILS[1], _RAILS[0]] = masses[1]
-    kept = np.delete(np.arange(len(STANDARD_PARAMETERS)), [_ROTOR[1], _RAILS[1]])
-    return basis[:, kept], kept
 
 
 def _diagonal_inertia(name: str) -> bool:

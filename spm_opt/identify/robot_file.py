@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from spm_opt.identify.estimate import Identification
 from spm_opt.identify.loop import LoopEstimate
 from spm_opt.model.params import robot_toml
@@ -17,16 +19,26 @@ def robot_file_text(identification: Identification, loops: LoopEstimate, name: s
         f"({ident.samples} samples); condition number {ident.condition_number:.3g}; "
         f"residual standard deviations {ident.residual_std_nm[0]:.4f} and "
         f"{ident.residual_std_nm[1]:.4f} N m.",
-        "# Base parameters (weighted least squares): estimate +- standard error [prior], the "
-        f"errors with the residuals' correlation factor {ident.correlation_factor:.3g};",
-        "# identified when two errors (a 95 % interval) are at most 10 % of the value.",
+        "# Base parameters, physically consistent: estimate +- standard error (of the "
+        "unconstrained weighted least squares,",
+        f"# with the residuals' correlation factor {ident.correlation_factor:.3g}) [prior]; "
+        "identified when off its bound, not moved by the constraints",
+        "# and two errors (a 95 % interval) at most 10 % of the value.",
     ]
-    for base_name, base_unit, prior, value, error, ok in ident.base_rows():
+    for (base_name, base_unit, prior, value, error, ok), why in zip(
+        ident.base_rows(), ident.reasons(), strict=True
+    ):
         status = "identified" if ok else "NOT identified"
         lines.append(
-            f"#   {value: .5g} +- {error:.2g} {base_unit} [{prior:.5g}] {status}: {base_name}"
+            f"#   {value: .5g} +- {error:.2g} {base_unit} [{prior:.5g}] {status} ({why}): "
+            f"{base_name}"
         )
     lines.append(_efficiency_comment(ident))
+    lines.append(
+        "# Physical constraints holding back the estimates: "
+        f"{'; '.join(ident.active) or 'none'}; this file's fit: "
+        f"{'; '.join(ident.file_active) or 'none'}."
+    )
     drive = dict(zip(STANDARD_PARAMETERS, ident.standard, strict=True))
     lines.append(
         "# Not in the robot file: the drives' offsets "
@@ -42,6 +54,20 @@ def _efficiency_comment(ident: Identification) -> str:
         f"# Gear efficiency: {ident.efficiency:.4g} +- {ident.efficiency_error:.2g} "
         f"[{ident.efficiency_prior:.4g}]. {efficiency_sentence(ident)}"
     )
+
+
+def efficiency_reason(ident: Identification) -> str:
+    """Why the gear efficiency η is identified or not, in a few words."""
+    loss = 1.0 - ident.efficiency
+    share = 2.0 * ident.efficiency_error / loss if loss > 0.0 else np.inf
+    if ident.efficiency_identified:
+        return f"2 s.e. within 10 % of the loss 1 − η ({100 * share:.2g} %)"
+    if ident.efficiency_significant:
+        return (
+            f"the loss is {loss / ident.efficiency_error:.1f} s.e. (kept), but 2 s.e. are "
+            f"{100 * share:.3g} % of it"
+        )
+    return "not told from a lossless gear train: η = 1 kept"
 
 
 def efficiency_sentence(ident: Identification) -> str:
