@@ -236,7 +236,7 @@ def test_connect_checks_both_actuators_enables_torque_and_reads_the_start(robot)
         holding = robot.actuator.current_map.current(
             dynamics.gravity_torque(robot, emulator.plant.position_rad[None, :])[0]
         )
-        for current in (backend.read_current(), measurement.current_a):
+        for current in (backend.read_current(0.1), measurement.current_a):
             np.testing.assert_allclose(current, holding, atol=0.05)
         described = backend.describe()
         assert described["backend"] == "dynamixel"
@@ -417,7 +417,7 @@ def test_a_vanished_device_is_a_communication_error_every_time(robot):
             with pytest.raises(CommunicationError, match=r"^port: "):
                 backend.read()
             with pytest.raises(CommunicationError, match=r"^port: "):
-                backend.read_current()
+                backend.read_current(0.1)
         assert backend.describe()["communication_failures"] == {
             "connect": 0,
             "read": 2,

@@ -34,7 +34,7 @@ from spm_opt.problem.trajectory import Trajectory
 
 ROBOTS = Path(__file__).resolve().parents[1] / "problems" / "robots"
 RATE_HZ = 500.0
-"""The identification runs' loop rate (the logged current one read at each period's middle)."""
+"""The identification runs' loop rate (the logged current the cycle's own read)."""
 SIGMAS = 2.0
 """The estimated gear efficiency lies within this many of its standard errors of the truth,
 and so does every identified base parameter, from synthetic torques (where the model is
@@ -344,7 +344,8 @@ def test_a_plant_equal_to_the_model_shows_friction_only_where_a_single_read_alia
     reads, viscous_range, tmp_path
 ):
     """100 Hz, the plant equal to the model (no drive friction): with the current read at
-    the middles of the period's ten parts (one in each of the plant's 1 ms steps) the
+    a random instant in each of the period's ten parts (one in each of the plant's 1 ms
+    steps) the
     joints' viscous friction comes out within ±0.01 N·m·s/rad of 0, within two standard
     errors, and the model predicts the filtered torques to 0.01 N·m; with the cycle's own
     read alone, the velocity loop's ripple at the read's instant shows as viscous friction
@@ -357,13 +358,15 @@ def test_a_plant_equal_to_the_model_shows_friction_only_where_a_single_read_alia
     assert execute(plan, backend, problem, log, settings).completed
     samples = log_samples([log], 2.0, None, 0.02)
     identification = identify(problem.robot, samples)
-    rows = {name: (value, error) for name, _, _, value, error, _ in identification.base_rows()}
     low, high = viscous_range
-    for joint in (1, 2):
-        value, error = rows[f"viscous_friction.theta{joint}"]
+    for joint in (1, 2):  # the fit before the physical bounds, which hold friction >= 0
+        k = identification.names.index(f"viscous_friction.theta{joint}")
+        value, error = identification.unconstrained[k], identification.standard_error[k]
         assert low <= value <= high, (joint, value, error)
         if reads:
             assert abs(value) <= 2.0 * error, (joint, value, error)
+        else:  # reported at its bound, not identified
+            assert identification.at_bound[k] and not identification.identified[k]
     if reads:
         prior_rms = prediction_rms(problem.robot, samples)
         assert np.all(prior_rms < 0.01), prior_rms

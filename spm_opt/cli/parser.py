@@ -395,8 +395,8 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         type=int,
         default=None,
         metavar="N",
-        help="read Present Current N times while each goal is held (at the middles of N "
-        "equal parts of the period) and log their mean: a log to identify the robot from "
+        help="read Present Current N times while each goal is held (one at a random "
+        "instant in each of N equal parts of the hold) and log their mean: a log to identify the robot from "
         "needs it, since one read a period aliases the velocity loop's answer to each goal "
         "step; each read is a bus transaction, 0 to 20 (default: sim 10, dynamixel 0)",
     )

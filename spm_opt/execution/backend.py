@@ -131,9 +131,9 @@ class Backend(Protocol):
     def read(self) -> Measurement:
         """Both actuators' state now (CommunicationError when the transaction fails)."""
 
-    def read_current(self) -> np.ndarray:
-        """Both actuators' Present Current now (2,), A, signed (CommunicationError when the
-        transaction fails)."""
+    def read_current(self, timeout_s: float) -> np.ndarray:
+        """Both actuators' Present Current now (2,), A, signed; CommunicationError when the
+        transaction fails or its replies take longer than ``timeout_s`` (s)."""
 
     def write_goal(self, position_rad: np.ndarray) -> None:
         """Send both goal positions (2,), rad (CommunicationError when it fails)."""

@@ -3,28 +3,37 @@ the reading, write the goal, count the failures and log the sample.
 
 The current a cycle logs is the cycle's own Present Current read, or, with
 :attr:`~spm_opt.execution.settings.ExecutionSettings.current_reads_per_cycle` N > 0, the
-mean of N reads made while the last goal was held, at the middles of N equal parts of the
-period. A goal is a step, and the actuator's velocity loop answers each step with a
-current that surges and then reverses within the period; one read, made at the same
-instant of every period, samples that ripple at one phase and turns it into a steady
-error. Measured on the simulated robot equal to its model (``problems/identification.toml``'s
-excitation at 100 Hz, the plant's current at every 1 ms step): the read just before the
-goal write lay below the period's mean current by 0.0140 and 0.0119 A per rad/s of the
-joint's rate (0.103 and 0.088 N·m·s/rad), what identification took for viscous friction
-of −0.112 and −0.095. On the loop model of the robot file (a continuous first-order
-velocity loop, 100 Hz), reads at the parts' ends would leave an error falling as 1/N
-(−0.029 N·m·s/rad at N = 5), at their middles as 1/N² (−0.0005); on the plant, whose
-current is constant over each 1 ms step, 10 reads at 100 Hz take one in every step. The
-mean refers to the middle of the period, half a period before the cycle's time
-(:mod:`spm_opt.identify.samples`). A read that fails, whose instant has passed, or that
-would not end before the deadline is left out and counted; the stop makes none.
+mean over the last goal's hold: N reads, one at a random instant in each of N equal parts
+of the span from that goal's write to two average reads before the deadline, and the
+cycle's own read for the rest, up to this cycle's write (weighted by their spans).
+
+Why. A goal is a step, and the actuator's velocity loop answers each step with a current
+that surges and then reverses within the period; one read, made at the same instant of
+every period, samples that ripple at one phase and turns it into a steady error. Measured
+on the simulated robot equal to its model (``problems/identification.toml``'s excitation
+at 100 Hz, the plant's current at every 1 ms step): the read just before the goal write
+lay below the period's mean current by 0.0140 and 0.0119 A per rad/s of the joint's rate
+(0.103 and 0.088 N·m·s/rad), what identification took for viscous friction of −0.112 and
+−0.095. Reads at fixed instants fail the same way, less, wherever the actuator applies a
+goal later than the write returns: through the SDK and the emulated actuators (which
+apply it some 0.5 ms later, more on a loaded machine), 2 and 4 reads at the parts'
+middles gave viscous friction of +0.010 to +0.035 N·m·s/rad where there is none, and 2
+placed from the deadline rather than the write +0.053. One read at a random instant in
+each part (stratified sampling) makes the mean's expectation the current's mean over the
+span wherever the goal took effect in it: 4 such reads gave −0.0015 ± 0.0015 and
+−0.0027 ± 0.0014 there (``tests/test_identify_pipeline.py``). On the simulated robot,
+whose current is constant over each 1 ms step, 10 reads at 100 Hz read every step once.
+The mean refers to about the middle of the period, half a period before the cycle's time
+(:mod:`spm_opt.identify.samples`). A read that fails or whose part has passed is left out
+and counted; the stop makes none. Each read is a bus transaction: the loop's timing pays
+for them (``docs/guide/run.md``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
+import random
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,8 +53,8 @@ _LOG = logging.getLogger(__name__)
 CURRENT_READ_SMOOTHING = 0.1
 """Weight of each current read's duration in their moving average."""
 CURRENT_READ_MARGIN = 2.0
-"""A current read is begun only if this many times the average read would end before the
-cycle's deadline."""
+"""Current reads are spread over the span that ends this many average reads before the
+cycle's deadline, so that the cycle's own read seldom waits for one."""
 
 
 class Ticker:
@@ -77,12 +86,6 @@ class Ticker:
         """The next deadline, on the clock, s."""
         return self._next
 
-    def middles(self, count: int) -> list[float]:
-        """The middles of ``count`` equal parts of the period before the next deadline, on
-        the clock (none before the first cycle)."""
-        start = self._next - self.period
-        return [start + (k + 0.5) * self.period / count for k in range(count)] if self.ticks else []
-
 
 @dataclass
 class Cycle:
@@ -92,6 +95,11 @@ class Cycle:
 
     time_s: float
     measurement: Measurement | None = None
+    held_current: tuple[np.ndarray, float, float] | None = None
+    """The mean Present Current (A) of the reads while the last goal was held, and the
+    span they covered, from that goal's write to its end (s, on the clock)."""
+    written_at: float | None = None
+    """When this cycle's goal write returned, on the clock (s)."""
     following_error: np.ndarray | None = None
     read_failed: bool = False
     write_failed: bool = False
@@ -130,7 +138,8 @@ class ControlLoop:
 
     Keeps what the cycles share: the commanded state, the last reading, the failed reads
     and writes (in a row, and in all), the current reads between goals that were missed
-    (``current_reads_missed``), the pace along the plan (``pace``, None outside the
+    (``current_reads_missed``) and the time one takes (``current_read_s``, s, a moving
+    average), the pace along the plan (``pace``, None outside the
     plan phase), the phase (``phase``, for the signals' record) and :attr:`status`.
 
     Parameters
@@ -174,7 +183,9 @@ class ControlLoop:
         self.last_measurement = first
         self.failed_cycles = self.reads_failed = self.writes_failed = 0
         self.current_reads_missed = 0
-        self._current_read_s = 0.0
+        self.current_read_s = 0.0
+        self._goal_written_at = -math.inf
+        self._phases = random.Random(0)  # where in its part each current read falls
         self.previous = (-self.ticker.period, True)
         """(the last cycle's time, s; whether its goal was delivered)."""
         self.pace: Pace | None = None
@@ -186,49 +197,52 @@ class ControlLoop:
         """Read the current while the last goal is held, wait for the next deadline and
         read both actuators; the reading's current is the mean of the period's current
         reads, if any was made."""
-        currents, unexpected = self._currents_between()
+        currents, span, unexpected = self._currents_between()
         cycle = Cycle(self.ticker.wait())
+        if currents:
+            cycle.held_current = (np.mean(currents, axis=0), *span)
         if unexpected is not None:
             cycle.notes.append(self._failure("current read", unexpected, cycle))
         try:
-            measurement = self._backend.read()
-            if currents:
-                mean = np.mean(currents, axis=0)
-                measurement = dataclasses.replace(measurement, current_a=mean)
-            cycle.measurement = self.last_measurement = measurement
+            cycle.measurement = self.last_measurement = self._backend.read()
         except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
             cycle.read_failed = True
             self.reads_failed += 1
             cycle.notes.append(self._failure("read", error, cycle))
         return cycle
 
-    def _currents_between(self) -> tuple[list[np.ndarray], Exception | None]:
-        """The Present Current reads at the period's instants before its deadline (none in
-        the stop); those that fail or would be late are counted in
-        :attr:`current_reads_missed`. Returns the reads and an unexpected exception (one
-        other than :class:`CommunicationError`), if a read raised one."""
+    def _currents_between(
+        self,
+    ) -> tuple[list[np.ndarray], tuple[float, float], Exception | None]:
+        """The Present Current reads, one at a random instant in each of equal parts of the
+        span from the last goal's write to when a read must begin to end before the
+        deadline (twice the time reads take); none in the stop. A read that fails or whose
+        part has passed is counted in :attr:`current_reads_missed`. Returns the reads, the
+        span (its beginning and end on the clock, s) and an unexpected exception (one other than
+        :class:`CommunicationError`), if a read raised one."""
         count = self._settings.current_reads_per_cycle
-        if count == 0 or self.phase == "stop":
-            return [], None
-        clock, spacing, currents = self._backend.clock, self.ticker.period / count, []
-        for instant in self.ticker.middles(count):
-            clock.sleep_until(instant)
+        deadline = self.ticker.deadline
+        if count == 0 or self.phase == "stop" or not self.ticker.ticks:
+            return [], (deadline, deadline), None
+        clock = self._backend.clock
+        begin = max(self._goal_written_at, deadline - self.ticker.period)
+        end = max(deadline - CURRENT_READ_MARGIN * self.current_read_s, begin)
+        spacing, currents = (end - begin) / count, []
+        for k in range(count):
+            clock.sleep_until(begin + (k + self._phases.random()) * spacing)
             start = clock.now()
-            late = start > instant + 0.5 * spacing
-            if late or start + CURRENT_READ_MARGIN * self._current_read_s > self.ticker.deadline:
+            if start > begin + (k + 1) * spacing:  # its part has passed
                 self.current_reads_missed += 1
                 continue
-            try:
-                currents.append(self._backend.read_current())
+            try:  # its replies awaited only until the deadline
+                currents.append(self._backend.read_current(deadline - start))
             except CommunicationError:
                 self.current_reads_missed += 1
             except Exception as error:  # noqa: BLE001 - any other failure is a fault
-                return currents, error
-            # a read is begun only if twice the time reads take (a moving average) would
-            # end it before the deadline: the cycle's own read seldom waits for one
+                return currents, (begin, end), error
             took = clock.now() - start
-            self._current_read_s += CURRENT_READ_SMOOTHING * (took - self._current_read_s)
-        return currents, None
+            self.current_read_s += CURRENT_READ_SMOOTHING * (took - self.current_read_s)
+        return currents, (begin, end), None
 
     def send(
         self, cycle: Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
@@ -246,6 +260,7 @@ class ControlLoop:
             self.writes_failed += 1
             cycle.notes.append(self._failure("write", error, cycle))
             return False
+        cycle.written_at = self._goal_written_at = self._backend.clock.now()
         commanded = self.commanded
         commanded.position, commanded.velocity = position, velocity
         commanded.acceleration, commanded.goal = acceleration, goal
@@ -354,13 +369,9 @@ class ControlLoop:
                 cycle.time_s, phase, along, reference, goal, None, None, cycle.status
             )
         else:
-            torque = self._torque_map.torque(measurement.current_a)
-            values = (
-                measurement.position_rad,
-                measurement.velocity_rad_s,
-                measurement.current_a,
-                torque,
-            )
+            current = self._held_current(cycle, measurement.current_a)
+            torque = self._torque_map.torque(current)
+            values = (measurement.position_rad, measurement.velocity_rad_s, current, torque)
             self._writer.append(
                 cycle.time_s,
                 phase,
@@ -372,6 +383,16 @@ class ControlLoop:
                 cycle.status,
             )
         self._update_status(phase, cycle, torque)
+
+    def _held_current(self, cycle: Cycle, read: np.ndarray) -> np.ndarray:
+        """The current the cycle logs, A: ``read`` (its own read), or, with reads while the
+        last goal was held, the mean over that goal's hold: their mean over their span and
+        the cycle's own read over the rest, up to this cycle's write."""
+        if cycle.held_current is None:
+            return read
+        mean, begin, end = cycle.held_current
+        rest = 0.0 if cycle.written_at is None else max(cycle.written_at - end, 0.0)
+        return (mean * (end - begin) + read * rest) / max(end - begin + rest, 1e-12)
 
     def _update_status(self, phase: str, cycle: Cycle, torque: np.ndarray | None) -> None:
         """Replace :attr:`status` (one assignment: a reader in another thread sees the old

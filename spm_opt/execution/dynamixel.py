@@ -392,8 +392,9 @@ class DynamixelRobot:
                 attempt += 1
                 logger.debug("read failed, attempt %d of %d: %s", attempt, self.retries + 1, exc)
 
-    def read_current(self) -> np.ndarray:
-        """Both actuators' Present Current, A (signed): one sync read of 2 bytes at 621.
+    def read_current(self, timeout_s: float) -> np.ndarray:
+        """Both actuators' Present Current, A (signed): one sync read of 2 bytes at 621,
+        its replies awaited at most ``timeout_s`` (s; and at most the backend's timeout).
 
         Raises
         ------
@@ -402,8 +403,10 @@ class DynamixelRobot:
         """
         if self._port is None:
             raise CommunicationError("read_current: the port is not open; call connect() first")
+        if self.timeout_s is not None:
+            timeout_s = min(timeout_s, self.timeout_s)
         try:
-            raw, _ = self._sync_replies(self._current_read, ADDR_PRESENT_CURRENT, 2)
+            raw, _ = self._sync_replies(self._current_read, ADDR_PRESENT_CURRENT, 2, timeout_s)
         except CommunicationError:
             self.failures["current read"] += 1
             raise
@@ -646,15 +649,19 @@ class DynamixelRobot:
             hardware_error=hardware,
         )
 
-    def _sync_replies(self, group: Any, address: int, length: int) -> tuple[list[bytes], list[int]]:
+    def _sync_replies(
+        self, group: Any, address: int, length: int, timeout_s: float | None = None
+    ) -> tuple[list[bytes], list[int]]:
         """Send the sync read ``group`` (``length`` bytes at ``address``) and receive each
-        id's reply: (its bytes, its error byte) per id, in the ids' order."""
+        id's reply within ``timeout_s`` (default: the backend's, else the SDK's): (its
+        bytes, its error byte) per id, in the ids' order."""
         sdk, packets = self._sdk, self._packets
         result = self._guarded(group.txPacket)
         if result != sdk.COMM_SUCCESS:
             raise CommunicationError(f"sync read at {address}: {packets.getTxRxResult(result)}")
-        if self.timeout_s is not None:
-            self._port.setPacketTimeoutMillis(self.timeout_s * 1000.0)
+        timeout_s = self.timeout_s if timeout_s is None else timeout_s
+        if timeout_s is not None:
+            self._port.setPacketTimeoutMillis(timeout_s * 1000.0)
         raw, errors = [], []
         for dxl_id in self.ids:
             data, result, error = self._receive(dxl_id, length)

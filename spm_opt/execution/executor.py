@@ -285,6 +285,7 @@ class Executor:
                     "current_reads": {
                         "per_cycle": settings.current_reads_per_cycle,
                         "missed": loop.current_reads_missed,
+                        "read_s": loop.current_read_s,
                     },
                     "backend": backend_state,
                     "exception": exception,

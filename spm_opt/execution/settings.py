@@ -63,8 +63,9 @@ class ExecutionSettings:
     flush_interval_s : float, s
         Longest time a sample waits before it is written to the log.
     current_reads_per_cycle : int
-        Present Current reads while a goal is held, at the middles of as many equal parts
-        of the period (0 to 20); the log holds their mean instead of the cycle's own read,
+        Present Current reads while a goal is held, one at a random instant in each of as
+        many equal parts of the hold (0 to 20); the log holds their mean instead of the
+        cycle's own read,
         which, made at the same instant of every period, aliases the velocity loop's
         answer to each goal step (:mod:`spm_opt.execution.cycle`). Each read is one more
         bus transaction: 0 (the default) leaves the loop's timing as it is.

@@ -76,8 +76,9 @@ class SimulatedRobot:
             hardware_error=(int(self.plant.hardware_error[0]), int(self.plant.hardware_error[1])),
         )
 
-    def read_current(self) -> np.ndarray:
-        """The plant's Present Current now, A, as the actuators report it."""
+    def read_current(self, timeout_s: float) -> np.ndarray:
+        """The plant's Present Current now, A, as the actuators report it (no wait:
+        ``timeout_s`` is moot)."""
         self.plant.advance_to(self.clock.now() - self._epoch)
         return self._actuator.current(self.plant.present_current_units())
 

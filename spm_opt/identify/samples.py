@@ -7,7 +7,7 @@ motion is the measured positions and velocities, filtered without phase (a 4th-o
 Butterworth filter forward and back, ``filtfilt``) at :data:`STATE_CUTOFF_HZ`, and the
 accelerations the derivative of those velocities; the torques are the log's (the current
 through the actuator's map). A log's current is the mean of Present Current reads at the
-middles of equal parts of the period before each row (:mod:`spm_opt.execution.cycle`): it
+random instants spread over the period before each row (:mod:`spm_opt.execution.cycle`): it
 refers to the middle of the period, half a period before the row's time, and is
 resampled there. A log of one read a period (none between goals: logs from before the
 executor read more, or above 1 kHz) has no such delay, and at 100 Hz holds the velocity
