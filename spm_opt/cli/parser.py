@@ -396,9 +396,10 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         default=None,
         metavar="N",
         help="read Present Current N times while each goal is held (one at a random "
-        "instant in each of N equal parts of the hold) and log their mean: a log to identify the robot from "
-        "needs it, since one read a period aliases the velocity loop's answer to each goal "
-        "step; each read is a bus transaction, 0 to 20 (default: sim 10, dynamixel 0)",
+        "instant in each of N equal parts of the hold) and log their mean: a log to "
+        "identify the robot from needs it, since one read a period aliases the velocity "
+        "loop's answer to each goal step; each read is a bus transaction, 0 to 20 "
+        "(default: sim 10, dynamixel 0)",
     )
     execute.add_argument(
         "--realtime", action="store_true", help="sim: run on the wall clock (default: fast)"
