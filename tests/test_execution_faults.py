@@ -293,7 +293,7 @@ WIRE_FAULTS = [
         Faults(drop=DropReplies(at=FAULT_AT_S, count=40)), "communication lost", id="drop"
     ),
     pytest.param(
-        Faults(crc=CorruptReplies(at=FAULT_AT_S, count=400)), "communication lost", id="crc"
+        Faults(crc=CorruptReplies(at=FAULT_AT_S, count=40)), "communication lost", id="crc"
     ),
     pytest.param(
         Faults(overload=(Overload(id=1, at=FAULT_AT_S),)),

@@ -341,7 +341,7 @@ def test_a_robot_file_written_reads_back_the_same_robot(tmp_path):
     ],
 )
 def test_a_plant_equal_to_the_model_shows_friction_only_where_a_single_read_aliases(
-    reads, viscous_range, tmp_path
+    reads, viscous_range, tmp_path, capsys
 ):
     """100 Hz, the plant equal to the model (no drive friction): with the current read at
     a random instant in each of the period's ten parts (one in each of the plant's 1 ms
@@ -370,3 +370,13 @@ def test_a_plant_equal_to_the_model_shows_friction_only_where_a_single_read_alia
     if reads:
         prior_rms = prediction_rms(problem.robot, samples)
         assert np.all(prior_rms < 0.01), prior_rms
+    # the command says so of a log read once a period, on stderr and in its report
+    out = tmp_path / "identified.toml"
+    status, _ = run_cli(
+        ["identify", str(log), "--problem", str(HARDWARE_PROBLEM), "--out", str(out)]
+        + ["--holdout", "0"]
+    )
+    assert status == 0
+    said = "the current is one read a control period"
+    assert (said in capsys.readouterr().err) == (not reads)
+    assert (said in out.with_suffix(".md").read_text()) == (not reads)

@@ -309,6 +309,14 @@ def _review(args: argparse.Namespace) -> None:
         print(path)
 
 
+SINGLE_READ_WARNING = (
+    "{logs}: the current is one read a control period, which aliases the velocity loop's "
+    "answer to each goal step (at 100 Hz, as viscous friction of about -0.1 N·m·s/rad); "
+    "log the runs to identify from with spm-opt execute --current-reads"
+)
+"""What ``identify`` says of logs read once a period (stderr and the report)."""
+
+
 def _identify(args: argparse.Namespace) -> None:
     from spm_opt.base.files import write_atomically
     from spm_opt.identify.estimate import identify
@@ -332,10 +340,11 @@ def _identify(args: argparse.Namespace) -> None:
     check_output_file(args.out, "--out")
     problem = load_problem(args.problem)
     check_log_rows(args.logs)
-    decimation, stretches = args.decimation, []
+    decimation, stretches, single_read = args.decimation, [], []
     for path in args.logs:
         samples = log_samples([path], args.cutoff_hz, decimation, args.min_speed)
         decimation = samples.decimation  # every log's as the first's
+        single_read += samples.single_read_logs
         fitted, held = hold_out(samples, args.holdout, plan_period(path))
         stretches += [(fitted, False)] + ([(held, True)] if held is not None else [])
     fit = joined([part for part, held in stretches if not held])
@@ -368,9 +377,10 @@ def _identify(args: argparse.Namespace) -> None:
     report = report_markdown(
         identification, problem.robot, predictions, float(actuator.current_map.torque(unit))
     )
+    aliased = [SINGLE_READ_WARNING.format(logs=", ".join(single_read))] if single_read else []
     files = {
         args.out: robot_file_text(identification, loops, args.out.stem),
-        args.out.with_suffix(".md"): "\n".join([report, *loops.markdown(*goals, on), ""]),
+        args.out.with_suffix(".md"): "\n".join([report, *loops.markdown(*goals, on), *aliased, ""]),
         args.out.with_suffix(".png"): to_png(figure),
     }
     write_atomically(files)
@@ -383,6 +393,8 @@ def _identify(args: argparse.Namespace) -> None:
             file=sys.stderr,
         )
     print(loops.summary(), file=sys.stderr)
+    for line in aliased:
+        _LOG.warning(line)
 
 
 def _compare(args: argparse.Namespace) -> None:

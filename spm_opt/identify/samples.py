@@ -25,7 +25,6 @@ variances.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -38,8 +37,6 @@ import scipy.signal
 from spm_opt.base.errors import InputError
 from spm_opt.base.input_limits import MAX_LOG_ROWS, excerpt, log_rows
 from spm_opt.execution.log import read_execution_log
-
-_LOG = logging.getLogger(__name__)
 
 MEASURED = (
     "position_theta1_rad",
@@ -78,6 +75,9 @@ class Samples:
         The parallel filter's cutoff.
     decimation : int
     min_speed_rad_s : float
+    single_read_logs : tuple of str
+        The logs whose current is one read a period (no reads while a goal was held):
+        at 100 Hz it holds the velocity loop's ripple as a steady error.
     """
 
     q: np.ndarray
@@ -89,6 +89,7 @@ class Samples:
     cutoff_hz: float
     decimation: int
     min_speed_rad_s: float
+    single_read_logs: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -172,6 +173,7 @@ def log_samples(
         cutoff_hz=cutoff_hz,
         decimation=decimation,
         min_speed_rad_s=min_speed_rad_s,
+        single_read_logs=tuple(dict.fromkeys(str(path) for path, *_, reads in runs if not reads)),
     )
 
 
@@ -183,13 +185,6 @@ def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray, int]]:
     values = log_values(table, MEASURED, path)
     complete = np.all(np.isfinite(values), axis=1) & np.isfinite(t)
     reads = current_reads_per_cycle(header)
-    if reads == 0:
-        _LOG.warning(
-            "log %s: its current is one read a control period, which aliases the velocity "
-            "loop's answer to each goal (at 100 Hz as viscous friction of about -0.1 "
-            "N·m·s/rad); log identification runs with execute --current-reads",
-            path,
-        )
     runs = []
     for chunk in np.split(np.arange(len(t)), np.flatnonzero(np.diff(complete.astype(int))) + 1):
         if complete[chunk[0]] and len(chunk) >= MIN_RUN_SAMPLES:
