@@ -114,6 +114,10 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
             marks=[pytest.mark.slow, pytest.mark.real_time],
         ),
         pytest.param(["identify_prototype.py", "--fit-seconds", "40"], marks=pytest.mark.slow),
+        pytest.param(
+            ["identification_coverage.py", "--seeds", "1", "--plants", "1", "--fit-seconds", "30"],
+            marks=pytest.mark.slow,
+        ),
     ],
     ids=lambda c: " ".join(c),
 )
@@ -125,6 +129,7 @@ def test_every_experiment_script_runs(tmp_path, command):
         "calibrate_prototype.py",
         "hardware_verification.py",
         "identify_prototype.py",
+        "identification_coverage.py",
         "feed_hold.py",
         "executed_cut.py",
     }
@@ -141,6 +146,13 @@ def test_every_experiment_script_runs(tmp_path, command):
         study = (tmp_path / "identification_study.md").read_text()
         assert "| gear efficiency η |" in study and "∫τᵀτ dt on the plant" in study
         assert (tmp_path / "identified.toml").is_file() and (tmp_path / "identified.png").is_file()
+    if command[0] == "identification_coverage.py":
+        rows = json.loads((tmp_path / "coverage.json").read_text())
+        assert [row["sweep"] for row in rows] == [
+            "plant equal to the model",
+            "family around prototype.toml",
+        ]
+        assert all(0.0 <= row["coverage_all"] <= 1.0 for row in rows)
     if command[0] == "hardware_verification.py":
         summary = json.loads((tmp_path / "hardware_verification.json").read_text())
         assert summary["run"]["completed"]

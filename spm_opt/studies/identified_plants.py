@@ -1,0 +1,134 @@
+"""Identification judged on plants whose truth is known: each plant runs an excitation and a
+validation plan on the simulated robot, the prior robot is fitted to the excitation's log,
+and the fit is held against the plant.
+
+For each plant (:class:`PlantIdentification`): every base parameter's estimate, standard
+error and truth (the plant's in the prior's base parameters,
+:func:`~spm_opt.identify.validate.true_base_parameters`), η's, the torque prediction error on
+the validation log of the prior, the identified robot and the plant's own model (the noise
+floor), and the actuators' loops estimated against the plant's own. :func:`coverage` is the
+share of truths within two standard errors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
+from spm_opt.execution.plant import PlantSettings, loop_rates
+from spm_opt.identify.estimate import Identification, identify
+from spm_opt.identify.loop import LoopEstimate, estimate_loops
+from spm_opt.identify.samples import log_samples
+from spm_opt.identify.validate import prediction_rms, true_base_parameters
+from spm_opt.model.params import Robot
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
+
+__all__ = ["PlantIdentification", "coverage", "identify_plant"]
+
+SAMPLES_SETTINGS = (2.0, None, 0.02)
+"""cutoff (Hz), decimation, smallest joint rate kept (rad/s): ``spm-opt identify``'s
+defaults."""
+
+
+@dataclass(frozen=True)
+class PlantIdentification:
+    """One plant identified from its own excitation log.
+
+    Attributes
+    ----------
+    identification : Identification
+    truth : ndarray, shape (r,)
+        The plant's base parameters in the prior's basis.
+    efficiency : float
+        The plant's η.
+    prior_rms, identified_rms, plant_rms : ndarray, shape (2,), N·m
+        Torque prediction error on the validation log: the prior's, the identified robot's
+        and the plant's own model's (what the noise leaves).
+    loops : LoopEstimate
+    plant_loops : (ndarray, ndarray), each shape (2,), 1/s
+        The plant's own Kp and ωv.
+    """
+
+    identification: Identification
+    truth: np.ndarray
+    efficiency: float
+    prior_rms: np.ndarray
+    identified_rms: np.ndarray
+    plant_rms: np.ndarray
+    loops: LoopEstimate
+    plant_loops: tuple[np.ndarray, np.ndarray]
+
+    def sigmas(self) -> np.ndarray:
+        """Each base parameter's distance from its truth (r,), in its standard errors."""
+        ident = self.identification
+        return np.abs(ident.estimate - self.truth) / ident.standard_error
+
+    def efficiency_sigmas(self) -> float:
+        """η's distance from the plant's, in its standard errors."""
+        ident = self.identification
+        return abs(ident.efficiency - self.efficiency) / ident.efficiency_error
+
+    def prediction_gain(self) -> np.ndarray:
+        """How many times better than the prior the identified robot predicts the
+        validation torques, per joint (2,)."""
+        return self.prior_rms / self.identified_rms
+
+
+def identify_plant(
+    problem: Problem,
+    plant_robot: Robot,
+    plant_settings: PlantSettings,
+    excitation: Trajectory,
+    validation: Trajectory,
+    folder: Path,
+    settings: ExecutionSettings,
+) -> PlantIdentification:
+    """Run ``excitation`` and ``validation`` on the simulated robot whose plant is
+    ``plant_robot`` with ``plant_settings`` (logs in ``folder``), identify ``problem.robot``
+    from the excitation's log and judge the fit."""
+    logs = []
+    for name, plan in (("excitation", excitation), ("validation", validation)):
+        backend = SimulatedRobot(
+            problem.robot,
+            start_rad=plan.position(plan.start_time),
+            settings=plant_settings,
+            plant_robot=plant_robot,
+        )
+        log = Path(folder) / f"{name}.csv"
+        result = execute(plan, backend, problem, log, settings)
+        if not result.completed:
+            raise RuntimeError(f"{name} on the plant stopped: {result.reason}")
+        logs.append(log)
+    identification = identify(problem.robot, log_samples([logs[0]], *SAMPLES_SETTINGS))
+    checked = log_samples([logs[1]], *SAMPLES_SETTINGS)
+    robots = (problem.robot, identification.robot, plant_robot)
+    rms = [prediction_rms(robot, checked) for robot in robots]
+    return PlantIdentification(
+        identification=identification,
+        truth=true_base_parameters(problem.robot, plant_robot),
+        efficiency=plant_robot.actuator.gear_efficiency,
+        prior_rms=rms[0],
+        identified_rms=rms[1],
+        plant_rms=rms[2],
+        loops=estimate_loops([logs[0]], problem.robot),
+        plant_loops=loop_rates(plant_robot, plant_settings),
+    )
+
+
+def coverage(results: list[PlantIdentification], identified_only: bool) -> tuple[int, int]:
+    """(truths within two standard errors, parameters counted) over ``results``: every
+    base parameter and η, or only those reported identified."""
+    within = counted = 0
+    for result in results:
+        ident = result.identification
+        chosen = ident.identified if identified_only else np.ones_like(ident.identified)
+        within += int(np.sum((result.sigmas() <= 2.0) & chosen))
+        counted += int(np.sum(chosen))
+        if ident.efficiency_identified or not identified_only:
+            within += int(result.efficiency_sigmas() <= 2.0)
+            counted += 1
+    return within, counted

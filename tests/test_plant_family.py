@@ -1,0 +1,204 @@
+"""Identification on plants the estimator never saw: a family of plausible plants around
+prototype.toml (masses ±30 %, the arcs' mass-centre radii ±15 %, μ 0.05–0.3, viscous
+friction 0–0.4 N·m·s/rad, Coulomb 0–0.04 N·m, η 0.7–1, rotor inertia 0–5e-3 kg·m², Kp
+20–60 and ωv 60–300 1/s), each run on the simulated robot, identified from its own
+excitation log and judged against its truth: the plant's parameters, which the log does not
+know."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+import spm_opt as so
+from spm_opt.base.errors import InputError
+from spm_opt.execution import ExecutionSettings
+from spm_opt.identify.validate import true_base_parameters
+from spm_opt.model.params import load_robot
+from spm_opt.model.regressor import BODIES
+from spm_opt.studies.identified_plants import PlantIdentification, coverage, identify_plant
+from spm_opt.verify.plant_family import COORDINATES, PlantFamily, PlantRanges
+
+ROOT = Path(__file__).resolve().parents[1]
+PRIOR = load_robot(ROOT / "problems" / "robots" / "prototype.toml")
+FAMILY = PlantFamily(PRIOR)
+IDENTIFICATION = ROOT / "problems" / "identification.toml"
+FIT = {"duration_s": 30.0, "periods": 3, "harmonics": 5, "max_iterations": 60}
+"""The fit's excitation: 3 periods of 10 s at the actuators' full speed, its design stopped
+after 60 IPOPT iterations."""
+VALIDATION = {"duration_s": 20.0, "periods": 2, "harmonics": 5, "seed": 7, "max_iterations": 60}
+"""Another motion for the validation log."""
+RUN = ExecutionSettings(
+    rate_hz=100.0, current_reads_per_cycle=10, max_following_error_rad=np.radians(5.0)
+)
+"""100 Hz, ten current reads a period; a following error of up to 5°: a plant's Kp of 20 1/s
+lags the goals led for the prior's 32 by 1.5° at the speed limit."""
+SIGMAS = 4.0
+"""An identified parameter lies within this many standard errors of its truth on every
+plant (a normal error passes 4σ once in 16,000)."""
+GAIN = 3.0
+"""The identified robot predicts the validation torques this many times better than the
+prior, unless within :data:`NOISE_ROOM` of the plant's own model."""
+NOISE_ROOM = 1.5
+MODEL_HOLDS_NM = 1.5 * 0.0043
+"""The plant's own model predicts its validation torques to within this where the
+estimator's model holds: 1.5 times the noise of ten reads of 8 mA in 16.11 mA units through
+the 2 Hz filter (0.0043 N·m, measured on the plant equal to the model). Where a gear train
+loses (η < 1), the velocity loop's answer to each goal step swings the motor's torque
+through the loss's two sides within the period, so the period's mean current is not the
+model's for the period's mean motion: measured on one plant (η 0.755, ωv 227 1/s), the
+plant's own model predicted joint 2 to 0.016 N·m at 100 Hz, 0.0061 at 500 Hz, 0.0054 with
+ωv 60 1/s, and the lower arc's gravity came out 6.3 standard errors off at 100 Hz."""
+COVERAGE = 0.75
+"""Least share of identified parameters whose truth lies within two standard errors over a
+batch's plants where the model holds (0.95 for honest errors). Measured there: 81 of 101
+(80 %) with this 30 s fit; with a 60 s fit, 67 of 70 (96 %) over 24 plants, and on the
+plant equal to the model 86 of 89 (97 %) over 20 excitation seeds."""
+points = st.lists(
+    st.floats(0.0, 1.0, allow_nan=False), min_size=len(COORDINATES), max_size=len(COORDINATES)
+)
+
+
+@given(point=points)
+@settings(max_examples=40, deadline=None, derandomize=True)
+def test_every_plant_lies_within_the_ranges_and_is_physical(point):
+    plant = FAMILY.plant(point, noise_seed=0)
+    ranges, robot = PlantRanges(), plant.robot
+    for name in BODIES:
+        body, prior = getattr(robot, name), getattr(PRIOR, name)
+        scale = body.mass / prior.mass
+        assert ranges.mass_scale[0] - 1e-12 <= scale <= ranges.mass_scale[1] + 1e-12
+        assert np.allclose(body.inertia, scale * prior.inertia)
+        moments = np.linalg.eigvalsh(body.inertia)
+        assert moments.min() > 0.0
+        assert moments.sum() - 2 * moments.max() >= -1e-12  # the triangle inequality
+        radius = body.com_radius / prior.com_radius
+        low, high = ranges.com_radius_scale if "arc" in name else (1.0, 1.0)
+        assert low - 1e-12 <= radius <= high + 1e-12
+    actuator = robot.actuator
+    assert 0.7 <= actuator.gear_efficiency <= 1.0
+    assert 0.0 <= actuator.rotor_inertia_kg_m2 <= 5e-3
+    assert all(0.0 <= f <= 0.4 for f in actuator.viscous_friction_nm_s_rad)
+    assert all(0.0 <= f <= 0.04 for f in actuator.coulomb_friction_nm)
+    assert 0.05 <= robot.friction.mu <= 0.3
+    # the loops asked for, to one unit of the control table's gains
+    gain, bandwidth = plant.loops()
+    asked = np.array(point)[[COORDINATES.index(f"position_loop_gain.theta{j}") for j in (1, 2)]]
+    assert np.all(np.abs(gain - (20.0 + 40.0 * asked)) <= 0.5)
+    assert np.all((bandwidth >= 59.0) & (bandwidth <= 301.0))
+    # the prior's base parameters hold every plant (the same structure, other values)
+    assert np.all(np.isfinite(true_base_parameters(PRIOR, robot)))
+
+
+def test_a_point_outside_the_cube_or_a_range_upside_down_is_refused():
+    with pytest.raises(InputError, match=r"point: expected 17 coordinates in \[0, 1\]"):
+        FAMILY.plant([0.5] * 16)
+    with pytest.raises(InputError, match=r"point: expected 17 coordinates in \[0, 1\]"):
+        FAMILY.plant([0.5] * 16 + [1.5])
+    with pytest.raises(InputError, match=r"mu = \(0.3, 0.05\): expected finite 0 <= low <= high"):
+        PlantRanges(mu=(0.3, 0.05))
+    with pytest.raises(InputError, match=r"gear_efficiency = \(0.7, 1.2\)"):
+        PlantRanges(gear_efficiency=(0.7, 1.2))
+
+
+def test_draws_are_reproducible_and_differ():
+    one, again = (FAMILY.draw(np.random.default_rng(5)) for _ in range(2))
+    other = FAMILY.draw(np.random.default_rng(6))
+    assert np.array_equal(one.point, again.point) and one.settings == again.settings
+    assert not np.array_equal(one.point, other.point)
+
+
+@pytest.fixture(scope="module")
+def plans():
+    """The problem, its fit excitation and a validation excitation of another seed."""
+    problem = so.load_problem(IDENTIFICATION, {"planner.excitation": FIT})
+    validation = so.load_problem(IDENTIFICATION, {"planner.excitation": VALIDATION})
+    return problem, so.plan(problem, "excitation"), so.plan(validation, "excitation")
+
+
+def identified(plans, plant) -> PlantIdentification:
+    problem, excitation, validation = plans
+    with tempfile.TemporaryDirectory() as folder:
+        return identify_plant(
+            problem, plant.robot, plant.settings, excitation, validation, Path(folder), RUN
+        )
+
+
+def model_holds(result: PlantIdentification) -> bool:
+    """Whether the plant's own model predicts its validation torques within the noise
+    (:data:`MODEL_HOLDS_NM`)."""
+    return bool(np.all(result.plant_rms <= MODEL_HOLDS_NM))
+
+
+def check_plant(result: PlantIdentification) -> None:
+    """What must hold on every plant: the validation torques predicted :data:`GAIN` times
+    better than by the prior (or within the noise), each loop estimate within 10 % of the
+    plant's or not carried; and where the estimator's model holds (:func:`model_holds`),
+    every identified parameter within :data:`SIGMAS` standard errors of its truth."""
+    ident = result.identification
+    far = [
+        f"{name}: {value:.4g} against {true:.4g} ± {error:.2g}"
+        for name, value, true, error, ok, sigmas in zip(
+            ident.names,
+            ident.estimate,
+            result.truth,
+            ident.standard_error,
+            ident.identified,
+            result.sigmas(),
+            strict=True,
+        )
+        if ok and sigmas > SIGMAS
+    ]
+    if model_holds(result):
+        assert not far, far
+        if ident.efficiency_identified:
+            assert result.efficiency_sigmas() <= SIGMAS, (ident.efficiency, result.efficiency)
+    room = np.maximum(result.prior_rms / GAIN, NOISE_ROOM * result.plant_rms)
+    assert np.all(result.identified_rms <= room), (
+        result.prior_rms,
+        result.identified_rms,
+        result.plant_rms,
+    )
+    loops = result.loops
+    carried = loops.robot(PRIOR).actuator
+    for estimate, reasons, truth in (
+        (carried.position_loop_gain_per_s, loops.gain_reason, result.plant_loops[0]),
+        (carried.velocity_loop_bandwidth_per_s, loops.bandwidth_reason, result.plant_loops[1]),
+    ):
+        for joint in range(2):
+            if reasons[joint]:  # not identifiable from this log: the prior kept
+                continue
+            assert abs(estimate[joint] - truth[joint]) <= 0.1 * truth[joint], (estimate, truth)
+
+
+@given(point=points, seed=st.integers(0, 2**16))
+@settings(
+    max_examples=2,
+    deadline=None,
+    derandomize=True,
+    phases=[Phase.explicit, Phase.generate],
+    suppress_health_check=[HealthCheck.too_slow],
+)
+def test_a_random_plant_is_identified_within_its_errors_and_predicted_better(plans, point, seed):
+    check_plant(identified(plans, FAMILY.plant(point, seed)))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("batch", range(2))
+def test_fifty_plants_identified_with_honest_errors(plans, batch):
+    """25 plants a batch: every one passes :func:`check_plant`; over the batch's plants where
+    the model holds, at least :data:`COVERAGE` of the identified parameters' truths lie
+    within two standard errors, and the model holds on most plants."""
+    rng = np.random.default_rng(1000 + batch)
+    results = [identified(plans, FAMILY.draw(rng)) for _ in range(25)]
+    for result in results:
+        check_plant(result)
+    holding = [result for result in results if model_holds(result)]
+    assert len(holding) >= 15, [result.plant_rms for result in results]
+    within, counted = coverage(holding, identified_only=True)
+    assert counted >= 25 and within >= COVERAGE * counted, (within, counted)
