@@ -31,7 +31,12 @@ import spm_opt as so
 from spm_opt.base.markdown import markdown_table
 from spm_opt.execution import ExecutionSettings
 from spm_opt.execution.plant import PlantSettings
-from spm_opt.studies.identified_plants import PlantIdentification, coverage, identify_plant
+from spm_opt.studies.identified_plants import (
+    NOISE_ROOM,
+    PlantIdentification,
+    coverage,
+    identify_plant,
+)
 from spm_opt.verify.plant_family import PlantFamily
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,9 +46,6 @@ RUN = ExecutionSettings(
 )
 """100 Hz, ten current reads a period (the simulated robot's default on the command line),
 a following error of up to 5° (the plants' loops differ from the prior's the lead uses)."""
-NOISE_NM = 1.5 * 0.0043
-"""The plant's own model predicts within the noise below this (1.5 times the noise of ten
-reads through the 2 Hz filter, measured on the plant equal to the model)."""
 
 
 def progress(message: str) -> None:
@@ -67,15 +69,14 @@ def summary(label: str, results: list[PlantIdentification]) -> dict[str, object]
     prediction gain, how often the model holds."""
     within_all, all_counted = coverage(results, identified_only=False)
     within, counted = coverage(results, identified_only=True)
-    holding = [r for r in results if np.all(r.plant_rms <= NOISE_NM)]
+    holding = [r for r in results if r.model_holds()]
     held_within, held_counted = coverage(holding, identified_only=True)
     gains = np.array([r.prediction_gain() for r in results])
-    noise_limited = np.array([r.prior_rms <= 1.5 * r.plant_rms for r in results])
+    noise_limited = np.array([r.prior_rms <= NOISE_ROOM * r.plant_rms for r in results])
     viscous = [
-        r.identification.unconstrained[r.identification.names.index(f"viscous_friction.theta{j}")]
-        - r.truth[r.identification.names.index(f"viscous_friction.theta{j}")]
+        r.identification.unconstrained[k] - r.truth[k]
         for r in results
-        for j in (1, 2)
+        for k in (r.identification.names.index(f"viscous_friction.theta{j}") for j in (1, 2))
     ]
     outside_noise = gains[~noise_limited]
     worst = float(np.min(outside_noise)) if outside_noise.size else None

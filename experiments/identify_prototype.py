@@ -39,7 +39,7 @@ from spm_opt.base.markdown import markdown_table
 from spm_opt.cli import main as spm_opt_main
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
 from spm_opt.identify.estimate import IDENTIFIED_RELATIVE_ERROR, identify
-from spm_opt.identify.samples import log_samples
+from spm_opt.identify.samples import DEFAULT_SAMPLING, log_samples
 from spm_opt.identify.validate import prediction_rms, true_base_parameters
 from spm_opt.model.params import load_robot
 from spm_opt.planners.excitation import with_length
@@ -57,9 +57,6 @@ emulator 4, which a loaded machine keeps up with."""
 VALIDATION = {"duration_s": 30.0, "periods": 3, "harmonics": 5, "seed": 1}
 LENGTHS_S = (30.0, 60.0)
 """The fit log's first seconds whose standard errors are shown besides the whole log's."""
-IDENTIFY_SETTINGS = (2.0, None, 0.02)
-"""cutoff (Hz), decimation, smallest joint rate kept (rad/s): `spm-opt identify`'s
-defaults."""
 
 
 def progress(message: str) -> None:
@@ -153,7 +150,7 @@ def lengths_table(prior: so.Problem, fit_log: Path, folder: Path, whole_s: float
     lengths = [seconds for seconds in LENGTHS_S if seconds < whole_s] + [whole_s]
     for seconds in lengths:
         part = truncated(fit_log, seconds, folder / f"fit_{seconds:g}s.csv")
-        result = identify(prior.robot, log_samples([part], *IDENTIFY_SETTINGS))
+        result = identify(prior.robot, log_samples([part], *DEFAULT_SAMPLING))
         names = result.names
         relative = result.standard_error / np.maximum(np.abs(result.estimate), 1e-300)
         columns.append([f"{100 * r:.3g} %" for r in relative])
@@ -208,9 +205,9 @@ def main() -> int:
     )
     if code != 0:
         return code
-    identification = identify(problem.robot, log_samples([logs["fit"]], *IDENTIFY_SETTINGS))
+    identification = identify(problem.robot, log_samples([logs["fit"]], *DEFAULT_SAMPLING))
     truth, all_within = truth_table(problem, plant, identification)
-    validation = log_samples([logs["validate"]], *IDENTIFY_SETTINGS)
+    validation = log_samples([logs["validate"]], *DEFAULT_SAMPLING)
     predictions = [
         [label, *(f"{v:.4f}" for v in prediction_rms(robot, validation))]
         for label, robot in (

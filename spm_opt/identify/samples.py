@@ -65,6 +65,10 @@ SAMPLES_PER_CUTOFF = 5
 """Samples kept a period of the parallel filter's cutoff by default (2.5 times its Nyquist
 rate). Neighbouring rows' residuals stay correlated (a lag-1 autocorrelation of 0.65 to
 0.75 measured on the simulated robot); identification's standard errors allow for it."""
+DEFAULT_SAMPLING = (2.0, None, 0.02)
+"""``spm-opt identify``'s defaults for :func:`log_samples`: the parallel filter's cutoff
+(Hz), the decimation (None: :data:`SAMPLES_PER_CUTOFF`) and the smallest joint rate kept
+(rad/s)."""
 MIN_RUN_SAMPLES = 50
 """Shortest run kept (filtfilt pads 15 samples at each end at order 4)."""
 

@@ -143,6 +143,9 @@ class PlantFamily:
         def within(pair: Pair, fraction: float) -> float:
             return float(pair[0] + fraction * (pair[1] - pair[0]))
 
+        def per_joint(pair: Pair, name: str) -> Pair:
+            return within(pair, value[f"{name}.theta1"]), within(pair, value[f"{name}.theta2"])
+
         bodies = {}
         for name in BODIES:
             body: Body = getattr(self.robot, name)
@@ -153,16 +156,12 @@ class PlantFamily:
             bodies[name] = dataclasses.replace(
                 body, mass=body.mass * scale, inertia=body.inertia * scale, com_radius=radius
             )
-        joints = ("theta1", "theta2")
         actuator = dataclasses.replace(
             self.robot.actuator,
-            viscous_friction_nm_s_rad=tuple(
-                within(ranges.viscous_friction_nm_s_rad, value[f"viscous_friction.{j}"])
-                for j in joints
+            viscous_friction_nm_s_rad=per_joint(
+                ranges.viscous_friction_nm_s_rad, "viscous_friction"
             ),
-            coulomb_friction_nm=tuple(
-                within(ranges.coulomb_friction_nm, value[f"coulomb_friction.{j}"]) for j in joints
-            ),
+            coulomb_friction_nm=per_joint(ranges.coulomb_friction_nm, "coulomb_friction"),
             gear_efficiency=within(ranges.gear_efficiency, value["gear_efficiency"]),
             rotor_inertia_kg_m2=within(ranges.rotor_inertia_kg_m2, value["rotor_inertia"]),
         )
@@ -176,15 +175,12 @@ class PlantFamily:
             friction=friction,
             **bodies,
         )
-        gain = tuple(
-            within(ranges.position_loop_gain_per_s, value[f"position_loop_gain.{j}"])
-            for j in joints
+        position, velocity = gains_for_rates(
+            robot,
+            self.settings,
+            per_joint(ranges.position_loop_gain_per_s, "position_loop_gain"),
+            per_joint(ranges.velocity_loop_bandwidth_per_s, "velocity_loop_bandwidth"),
         )
-        bandwidth = tuple(
-            within(ranges.velocity_loop_bandwidth_per_s, value[f"velocity_loop_bandwidth.{j}"])
-            for j in joints
-        )
-        position, velocity = gains_for_rates(robot, self.settings, gain, bandwidth)  # type: ignore[arg-type]
         settings = dataclasses.replace(
             self.settings, position_p_gain=position, velocity_p_gain=velocity, seed=noise_seed
         )
