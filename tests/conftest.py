@@ -2,7 +2,6 @@
 hardware verification (Section 6) with its cubic plan, and the check of every figure a
 test saves."""
 
-import os
 import signal
 from collections.abc import Iterator
 from pathlib import Path
@@ -11,12 +10,6 @@ from typing import Any
 import pytest
 
 import spm_opt as so
-
-if os.environ.get("PYTEST_XDIST_WORKER"):
-    # One BLAS thread a worker: the workers share the cores already, and a worker's
-    # identification (OpenBLAS's two threads: 181 % CPU measured) beside a real-time test
-    # took both cores from the emulator, whose runs then stopped on a following error
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
