@@ -180,6 +180,8 @@ def test_a_random_plant_is_identified_within_its_errors_and_predicted_better(pla
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("real time")  # its fits load both cores (OpenBLAS): the emulator's
+# real-time runs beside it stopped on a following error, so it runs where they run, in turn
 @pytest.mark.parametrize("batch", range(1))
 def test_plants_of_the_family_identified_with_honest_errors(plans, batch):
     """25 plants a batch (one in CI: a batch takes about 5 min): every one passes
