@@ -167,6 +167,7 @@ def check_plant(result: PlantIdentification) -> None:
             assert abs(estimate[joint] - truth[joint]) <= 0.1 * truth[joint], (estimate, truth)
 
 
+@pytest.mark.xdist_group("real time")  # as the slow sweep below, for the same reason
 @given(point=points, seed=st.integers(0, 2**16))
 @settings(
     max_examples=2,
