@@ -113,10 +113,15 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
             ["hardware_verification.py", "--backend", "emulator"],
             marks=[pytest.mark.slow, pytest.mark.real_time],
         ),
-        pytest.param(["identify_prototype.py", "--fit-seconds", "40"], marks=pytest.mark.slow),
+        # the identification experiments' fits load both cores (OpenBLAS): in the real-time
+        # tests' group, so that the emulator's runs never share the machine with them
+        pytest.param(
+            ["identify_prototype.py", "--fit-seconds", "40"],
+            marks=[pytest.mark.slow, pytest.mark.xdist_group("real time")],
+        ),
         pytest.param(
             ["identification_coverage.py", "--seeds", "1", "--plants", "1", "--fit-seconds", "30"],
-            marks=pytest.mark.slow,
+            marks=[pytest.mark.slow, pytest.mark.xdist_group("real time")],
         ),
     ],
     ids=lambda c: " ".join(c),
