@@ -10,8 +10,9 @@ platform whose drive cannot overcome its friction stays at rest instead of chatt
 The plant robot may carry what a planning model leaves out: the actuators' reflected rotor
 inertia (added to M's diagonal), viscous and Coulomb friction in the joints' gear trains
 (Coulomb as two more lines of the same implicit step), gear losses (the load gets η τ from
-a motor that drove it in the last step, τ / η from one it was driven back by) and encoder
-zero offsets (the encoders read θ + offset, and each position loop holds its reading).
+a motor that drives it in the step, τ / η from one it is driven back by: the step is solved
+again with the other side where its power disagrees with the side it was solved with) and
+encoder zero offsets (the encoders read θ + offset, and each position loop holds its reading).
 
 Each actuator runs the Dynamixel PRO's integrated position controller as the reference
 describes it (the paper's Fig. 18): a P position loop gives a rate command, limited by
@@ -57,6 +58,11 @@ DEFAULT_POSITION_P_GAIN = 32
 DEFAULT_VELOCITY_P_GAIN = 256
 DEFAULT_VELOCITY_I_GAIN = 16
 """The control table's default gains (addresses 594, 588, 586)."""
+
+SIDE_TRIALS = 3
+"""Solves of a step at most, each with the gear train's side (driving or driven) the last
+one's power took, until they agree (a torque that would sit at zero may alternate: the
+last is kept)."""
 
 OVERLOAD_BIT = 5
 """Hardware Error Status bit of an overload."""
@@ -314,16 +320,6 @@ class DynamixelPlant:
         if any(self._joint_friction):
             lines += [(1.0, 0.0), (0.0, 1.0)]
             thresholds += [dt * f for f in self._joint_friction]
-        # the load gets η τ from a motor that drives it, τ / η from one it drives back
-        share = [self._efficiency if d else 1.0 / self._efficiency for d in self._driving]
-        problem = _StepProblem(
-            ((m00, m01), (m10, m11)),
-            lines,
-            thresholds,
-            dt,
-            self._damping,
-            (share[0], share[1]),
-        )
         enabled = [bool(e) for e in self.torque_enabled]
         q, v = self.position_rad.tolist(), self.velocity_rad_s.tolist()
         bias_torque = bias.tolist()
@@ -338,20 +334,26 @@ class DynamixelPlant:
                 # τ = K (v_cmd − v⁺) + Ki z, the integral taken at the end of the step
                 gain[j] = s.velocity_p_gain_per_unit * float(self.velocity_p_gain[j]) + ki * dt
                 held[j] = ki * float(self._integral[j])
-        new_rate, torque = problem.solve(v, bias_torque, gain, command, held, enabled)
-        current = [self._current(t) for t in torque]
-        saturated = [
-            enabled[j] and abs(current[j]) > float(self.current_limit_a[j]) for j in range(2)
-        ]
-        if any(saturated):
-            for j in range(2):
-                if saturated[j]:
-                    limit = float(self.current_limit_a[j])
-                    current[j] = min(max(current[j], -limit), limit)
-                    held[j] = float(self._actuator.current_map.torque(current[j]))
-                    gain[j] = 0.0
-            new_rate, torque = problem.solve(v, bias_torque, gain, command, held, enabled)
-            current = [self._current(t) for t in torque]
+        # the load gets η τ from a motor that drives it, τ / η from one it drives back: the
+        # side the step's own power takes (from the last step's, changed while they differ)
+        driving = list(self._driving)
+        for _ in range(SIDE_TRIALS):
+            share = [self._efficiency if d else 1.0 / self._efficiency for d in driving]
+            problem = _StepProblem(
+                ((m00, m01), (m10, m11)),
+                lines,
+                thresholds,
+                dt,
+                self._damping,
+                (share[0], share[1]),
+            )
+            new_rate, torque, current, saturated = self._solve(
+                problem, v, bias_torque, list(gain), command, list(held), enabled
+            )
+            taken = [torque[j] * new_rate[j] >= 0.0 for j in range(2)]
+            if taken == driving or self._efficiency == 1.0:
+                break
+            driving = taken
         for j in range(2):
             integrating = enabled[j] and not saturated[j]
             if integrating:
@@ -363,6 +365,35 @@ class DynamixelPlant:
             self.velocity_rad_s[j] = new_rate[j]
             self._driving[j] = torque[j] * new_rate[j] >= 0.0
         self.time_s += dt
+
+    def _solve(
+        self,
+        problem: _StepProblem,
+        rate: list[float],
+        bias: list[float],
+        gain: list[float],
+        command: list[float],
+        held: list[float],
+        enabled: list[bool],
+    ) -> tuple[list[float], list[float], list[float], list[bool]]:
+        """One implicit step: new rates, motor torques and currents, and which currents the
+        Torque Limit holds (there the torque is the limit's: ``gain`` and ``held``, which
+        this changes, then give it)."""
+        new_rate, torque = problem.solve(rate, bias, gain, command, held, enabled)
+        current = [self._current(t) for t in torque]
+        saturated = [
+            enabled[j] and abs(current[j]) > float(self.current_limit_a[j]) for j in range(2)
+        ]
+        if any(saturated):
+            for j in range(2):
+                if saturated[j]:
+                    limit = float(self.current_limit_a[j])
+                    current[j] = min(max(current[j], -limit), limit)
+                    held[j] = float(self._actuator.current_map.torque(current[j]))
+                    gain[j] = 0.0
+            new_rate, torque = problem.solve(rate, bias, gain, command, held, enabled)
+            current = [self._current(t) for t in torque]
+        return new_rate, torque, current, saturated
 
     def _current(self, torque_nm: float) -> float:
         """Motor current, A, for an output torque (the actuator's map, on one float)."""
@@ -434,7 +465,10 @@ def _minimise(
     Every line a_k·v = 0 passes through the origin, so the minimiser of this convex
     function is the smooth stationary point of one sign pattern (each term sliding), the
     minimum along one line (that term stuck), or the origin: every candidate is computed in
-    closed form and the one of least value is the minimiser.
+    closed form and the one of least value is the minimiser. A stationary point that slides
+    the way its sign pattern says is the minimiser at once: the rest are valued only when
+    something sticks (measured on a plant with joint Coulomb friction: 0.14 ms a call before,
+    0.044 after, the same states to the bit).
     """
     (w00, w01), (w10, w11) = weights
     b0, b1 = linear
@@ -466,7 +500,13 @@ def _minimise(
         for ((a0, a1), c), sign in zip(terms, signs, strict=True):
             r0 -= a0 * c * sign
             r1 -= a1 * c * sign
-        candidates.append(((w11 * r0 - w01 * r1) / det, (w00 * r1 - w10 * r0) / det))
+        v = ((w11 * r0 - w01 * r1) / det, (w00 * r1 - w10 * r0) / det)
+        # every term sliding the way its sign says: the function is smooth there and
+        # stationary, so (strictly convex) this is the minimiser and no other need be valued
+        sliding = zip(terms, signs, strict=True)
+        if all((a0 * v[0] + a1 * v[1]) * sign > 0.0 for ((a0, a1), _), sign in sliding):
+            return v
+        candidates.append(v)
     for (k0, k1), _ in terms:
         norm = math.hypot(k0, k1)
         candidates.append(along(-k1 / norm, k0 / norm))
