@@ -63,12 +63,25 @@ def test_each_part_of_a_hold_is_read_once_and_the_log_holds_their_mean(hardware_
         assert deadline == pytest.approx(written_at + period, abs=1e-9)
         parts = [(time - written_at) / (period / READS) for _, time, _ in between[:READS]]
         assert [int(np.floor(p + 1e-9)) for p in parts] == list(range(READS)), parts
-        logged.append(np.mean([current for _, _, current in between[:READS]], axis=0))
+        logged.append(np.array([current for _, _, current in between[:READS]]))
     # the log's current is those reads' mean (the write takes no time: the own read's
-    # share is 0)
+    # share is 0), and its torque's sides the mean of the reads' torques above zero and
+    # below it, per joint
     currents = table[["current_theta1_a", "current_theta2_a"]].to_numpy()
     rows = np.flatnonzero(np.isfinite(currents[:, 0]))[1 : len(logged) + 1]
-    np.testing.assert_allclose(currents[rows], logged, atol=1e-12)
+    np.testing.assert_allclose(currents[rows], [r.mean(axis=0) for r in logged], atol=1e-12)
+    torque_map = hardware_problem.robot.actuator.current_map
+    for side, keep in (("positive", lambda t: t > 0.0), ("negative", lambda t: t < 0.0)):
+        columns = [f"torque_{side}_theta{joint}_nm" for joint in (1, 2)]
+        expected = []
+        for reads in logged:
+            torques = torque_map.torque(reads)
+            expected.append([sum(t for t in torques[:, j] if keep(t)) / READS for j in (0, 1)])
+        np.testing.assert_allclose(table[columns].to_numpy()[rows], expected, atol=1e-8)
+    crossing = np.sum(
+        (table["torque_positive_theta1_nm"] > 0) & (table["torque_negative_theta1_nm"] < 0)
+    )
+    assert crossing > 0  # some holds read the torque on both sides
 
 
 def test_the_stop_makes_no_current_reads(hardware_problem, tmp_path):

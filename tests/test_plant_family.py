@@ -45,17 +45,17 @@ RUN = ExecutionSettings(
 lags the goals led for the prior's 32 by 1.5° at the speed limit."""
 SIGMAS = 4.0
 """An identified parameter lies within this many standard errors of its truth, or 10 % of
-it, on every plant where the model holds (a normal error passes 4σ once in 16,000). Seen
-beyond 4σ: one plant of the second 25 of the slow sweep's seeds, viscous friction 0.356
-against 0.3489 ± 0.0014 (2 %)."""
+it, on every plant (a normal error passes 4σ once in 16,000). Measured over the slow
+sweep's 50 plants: at most 3.1."""
 GAIN = 3.0
 """The identified robot predicts the validation torques this many times better than the
 prior, unless within ``NOISE_ROOM`` times the plant's own model's error."""
-COVERAGE = 0.75
+COVERAGE = 0.85
 """Least share of identified parameters whose truth lies within two standard errors over a
-batch's plants where the model holds (0.95 for honest errors). Measured there: 81 of 101
-(80 %) with this 30 s fit; with a 60 s fit, 67 of 70 (96 %) over 24 plants, and on the
-plant equal to the model 86 of 89 (97 %) over 20 excitation seeds."""
+batch's plants (0.95 for honest errors). Measured with this 30 s fit: 133 of 143 (93.0 %)
+and 127 of 143 (88.8 %) over the slow sweep's two batches; before each plant step took the
+gear train's side from its own power and the log kept the reads' sides, 84 of 121 (69 %)
+over the second."""
 points = st.lists(
     st.floats(0.0, 1.0, allow_nan=False), min_size=len(COORDINATES), max_size=len(COORDINATES)
 )
@@ -127,10 +127,12 @@ def identified(plans, plant) -> PlantIdentification:
 
 
 def check_plant(result: PlantIdentification) -> None:
-    """What must hold on every plant: the validation torques predicted :data:`GAIN` times
-    better than by the prior (or within the noise), each loop estimate within 10 % of the
-    plant's or not carried; and where the estimator's model holds (``model_holds``),
-    every identified parameter within :data:`SIGMAS` standard errors of its truth."""
+    """What must hold on every plant: the plant's own model predicts its validation
+    torques within the noise (``model_holds``); the identified robot predicts them
+    :data:`GAIN` times better than the prior (or within the noise); every identified
+    parameter lies within :data:`SIGMAS` standard errors of its truth or 10 % of it; each
+    loop estimate within 10 % of the plant's or not carried."""
+    assert result.model_holds(), result.plant_rms
     ident = result.identification
     far = [
         f"{name}: {value:.4g} against {true:.4g} ± {error:.2g}"
@@ -145,10 +147,9 @@ def check_plant(result: PlantIdentification) -> None:
         )
         if ok and sigmas > SIGMAS and abs(value - true) > 0.1 * abs(true)
     ]
-    if result.model_holds():
-        assert not far, far
-        if ident.efficiency_identified:
-            assert result.efficiency_sigmas() <= SIGMAS, (ident.efficiency, result.efficiency)
+    assert not far, far
+    if ident.efficiency_identified:
+        assert result.efficiency_sigmas() <= SIGMAS, (ident.efficiency, result.efficiency)
     room = np.maximum(result.prior_rms / GAIN, NOISE_ROOM * result.plant_rms)
     assert np.all(result.identified_rms <= room), (
         result.prior_rms,
@@ -183,17 +184,14 @@ def test_a_random_plant_is_identified_within_its_errors_and_predicted_better(pla
 @pytest.mark.slow
 @pytest.mark.xdist_group("real time")  # its fits load both cores (OpenBLAS): the emulator's
 # real-time runs beside it stopped on a following error, so it runs where they run, in turn
-@pytest.mark.parametrize("batch", range(1))
+@pytest.mark.parametrize("batch", range(2))
 def test_plants_of_the_family_identified_with_honest_errors(plans, batch):
-    """25 plants a batch (one in CI: a batch takes about 5 min): every one passes
-    :func:`check_plant`; over the batch's plants where the model holds, at least
-    :data:`COVERAGE` of the identified parameters' truths lie within two standard errors,
-    and the model holds on most plants."""
+    """25 plants a batch (two in CI, 50 plants: a batch takes about 4 min): every one
+    passes :func:`check_plant`; over the batch, at least :data:`COVERAGE` of the
+    identified parameters' truths lie within two standard errors."""
     rng = np.random.default_rng(1000 + batch)
     results = [identified(plans, FAMILY.draw(rng)) for _ in range(25)]
     for result in results:
         check_plant(result)
-    holding = [result for result in results if result.model_holds()]
-    assert len(holding) >= 15, [result.plant_rms for result in results]
-    within, counted = coverage(holding, identified_only=True)
+    within, counted = coverage(results, identified_only=True)
     assert counted >= 25 and within >= COVERAGE * counted, (within, counted)

@@ -24,7 +24,18 @@ span wherever the goal took effect in it: 4 such reads gave −0.0015 ± 0.0015 
 −0.0027 ± 0.0014 there (``tests/test_identify_pipeline.py``). On the simulated robot,
 whose current is constant over each 1 ms step, 10 reads at 100 Hz read every step once.
 The mean refers to about the middle of the period, half a period before the cycle's time
-(:mod:`spm_opt.identify.samples`). A read that fails or whose part has passed is left out
+(:mod:`spm_opt.identify.samples`).
+
+The same reads' torques are also logged split by sign, the mean of their positive parts
+and of their negative parts. Where a gear train loses (η < 1), the load gets η τ from a
+motor that drives it and τ / η from one it drives back, and the velocity loop's answer to
+each goal step swings the motor's torque across zero within the period: on the simulated
+robot with η 0.75 and a velocity loop of 227 1/s (``problems/identification.toml``'s
+excitation, 30 s), the torque swung by 0.33 and 0.23 N·m within the median period, against
+loads of 0.19 and 0.08 N·m, and the side changed within half the periods. The period's mean
+torque then is no model's torque at the period's mean motion; its two sides are: the
+load's mean torque is η times the driving side plus the driven side over η
+(:mod:`spm_opt.identify.estimate`). A read that fails or whose part has passed is left out
 and counted; the stop makes none. Each read is a bus transaction: the loop's timing pays
 for them (``docs/guide/run.md``).
 """
@@ -98,6 +109,9 @@ class Cycle:
     held_current: tuple[np.ndarray, float, float] | None = None
     """The mean Present Current (A) of the reads while the last goal was held, and the
     span they covered, from that goal's write to its end (s, on the clock)."""
+    held_sides: tuple[np.ndarray, np.ndarray] | None = None
+    """The same reads' torques (N·m) split by sign: the mean of their positive parts and
+    of their negative parts (each (2,); their sum is the mean of the reads' torques)."""
     written_at: float | None = None
     """When this cycle's goal write returned, on the clock (s)."""
     following_error: np.ndarray | None = None
@@ -201,6 +215,7 @@ class ControlLoop:
         cycle = Cycle(self.ticker.wait())
         if currents:
             cycle.held_current = (np.mean(currents, axis=0), *span)
+            cycle.held_sides = self._sides(np.array(currents))
         if unexpected is not None:
             cycle.notes.append(self._failure("current read", unexpected, cycle))
         try:
@@ -369,9 +384,16 @@ class ControlLoop:
                 cycle.time_s, phase, along, reference, goal, None, None, cycle.status
             )
         else:
-            current = self._held_current(cycle, measurement.current_a)
+            own = measurement.current_a
+            held_mean = None if cycle.held_current is None else cycle.held_current[0]
+            current = self._over_hold(cycle, own, held_mean)
             torque = self._torque_map.torque(current)
-            values = (measurement.position_rad, measurement.velocity_rad_s, current, torque)
+            held = cycle.held_sides or (None, None)
+            sides = [
+                self._over_hold(cycle, part, held_part)
+                for part, held_part in zip(self._sides(own[None, :]), held, strict=True)
+            ]
+            values = (measurement.position_rad, measurement.velocity_rad_s, current, torque, *sides)
             self._writer.append(
                 cycle.time_s,
                 phase,
@@ -384,15 +406,22 @@ class ControlLoop:
             )
         self._update_status(phase, cycle, torque)
 
-    def _held_current(self, cycle: Cycle, read: np.ndarray) -> np.ndarray:
-        """The current the cycle logs, A: ``read`` (its own read), or, with reads while the
-        last goal was held, the mean over that goal's hold: their mean over their span and
-        the cycle's own read over the rest, up to this cycle's write."""
-        if cycle.held_current is None:
-            return read
-        mean, begin, end = cycle.held_current
+    def _sides(self, currents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Reads' torques (currents (k, 2), A, through the map) split by sign: the means of
+        their positive and of their negative parts (2,), N·m."""
+        torques = self._torque_map.torque(currents)
+        return np.mean(np.maximum(torques, 0.0), axis=0), np.mean(np.minimum(torques, 0.0), axis=0)
+
+    @staticmethod
+    def _over_hold(cycle: Cycle, own: np.ndarray, held: np.ndarray | None) -> np.ndarray:
+        """A value the cycle logs: ``own``, of its own read, or, with reads while the last
+        goal was held (``held``, their mean), the mean over that goal's hold: theirs over
+        their span and the cycle's own over the rest, up to this cycle's write."""
+        if held is None or cycle.held_current is None:
+            return own
+        _, begin, end = cycle.held_current
         rest = 0.0 if cycle.written_at is None else max(cycle.written_at - end, 0.0)
-        return (mean * (end - begin) + read * rest) / max(end - begin + rest, 1e-12)
+        return (held * (end - begin) + own * rest) / max(end - begin + rest, 1e-12)
 
     def _update_status(self, phase: str, cycle: Cycle, torque: np.ndarray | None) -> None:
         """Replace :attr:`status` (one assignment: a reader in another thread sees the old

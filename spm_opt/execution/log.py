@@ -63,6 +63,10 @@ COLUMNS = (
     "current_theta2_a",
     "torque_theta1_nm",
     "torque_theta2_nm",
+    "torque_positive_theta1_nm",
+    "torque_positive_theta2_nm",
+    "torque_negative_theta1_nm",
+    "torque_negative_theta2_nm",
     "hardware_error_1",
     "hardware_error_2",
     "status",
@@ -75,13 +79,16 @@ joints are to be at the cycle's time (the plan at ``plan_time_s`` in the plan ph
 approach's or the stop's profile, the position held) and the goals: what the actuators
 hold after the cycle, the reference led by the position loop's lag (see
 :mod:`spm_opt.execution.tracking`; a failed write leaves the last reference and goal
-delivered); measured values are empty in a cycle whose read failed."""
+delivered); ``torque_positive_*`` and ``torque_negative_*``: the Present Current reads'
+torques behind ``torque_*`` split by sign, the means of their positive and of their
+negative parts (:mod:`spm_opt.execution.cycle`); measured values are empty in a cycle
+whose read failed."""
 
-LINE_BYTES = 320
+LINE_BYTES = 384
 """Bytes a sample's line may take, for the room a log needs (:func:`bytes_needed`): a line
-whose every number is negative with an exponent is 285 bytes with an "ok" status; the
-lines of toppra's run of ``craniotomy_hardware.toml`` on the simulated robot average 162
-bytes, at most 199."""
+whose every number is negative with an exponent is 351 bytes with an "ok" status; the
+lines of toppra's run of ``craniotomy_hardware.toml`` on the simulated robot average 214
+bytes, at most 253."""
 
 MAX_PENDING_BYTES = 64_000_000
 """Lines the disk has not taken are kept in memory up to this many bytes (about 200,000
@@ -179,18 +186,19 @@ class LogWriter:
         along: tuple[float, float, float] | None,
         reference: np.ndarray,
         goal: np.ndarray,
-        measured: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
+        measured: tuple[np.ndarray, ...] | None,
         hardware_error: tuple[int, int] | None,
         status: str,
     ) -> None:
         """Queue one sample; never blocks, never raises an OSError. ``along`` is (plan
         time, feed, feed target) or None, ``reference`` and ``goal`` positions (rad),
-        ``measured`` (position, velocity, current, torque) or None."""
+        ``measured`` (position, velocity, current, torque, its positive and its negative
+        side) or None."""
         values = [f"{time_s:.9f}", phase]
         values += ["", "", ""] if along is None else [f"{v:.12g}" for v in along]
         values += [f"{v:.9g}" for v in (*reference, *goal)]
         if measured is None:
-            values += [""] * 8
+            values += [""] * 12
         else:
             values += [f"{v:.9g}" for part in measured for v in part]
         values += [str(e) for e in hardware_error] if hardware_error else ["", ""]

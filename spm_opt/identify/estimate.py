@@ -15,8 +15,12 @@ the base parameters of the problem's robot (:mod:`spm_opt.model.base_parameters`
 sides through the same low-pass filter (parallel filtering). τ_j is the torque at the
 joints; the actuators measure the motor's, τ_m, and through a gear train of efficiency η,
 τ_j = η τ_m where the motor drives its load and τ_m / η where the load drives it back
-(:meth:`~spm_opt.model.actuator.Actuator.drive_torque`). Which of the two, the model
-decides: where the joint torque of a fit with η = 1 has the rate's sign (the measured
+(:meth:`~spm_opt.model.actuator.Actuator.drive_torque`). A log whose current is a
+period's mean holds its reads split by sign: τ_j is η times the side that turns the way
+the joint does plus the other over η, exact however the velocity loop swings the torque
+within the period (:meth:`~spm_opt.identify.samples.Samples.joint_torque`). Where the model
+decides which of the two (a log without the sides, and to express residuals in motor
+torque): where the joint torque of a fit with η = 1 has the rate's sign (the measured
 torque's own sign is noise near zero, and smears a joint's Coulomb step at a reversal).
 
 For a given η the estimate is weighted least squares: ordinary least squares first, then
@@ -87,7 +91,7 @@ from spm_opt.identify.physical_robot import (
     robot_with_parameters,
     standard_estimate,
 )
-from spm_opt.identify.samples import Samples, correlation_factor
+from spm_opt.identify.samples import Samples, correlation_factor, gear_share
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
 from spm_opt.model.params import Robot
 from spm_opt.model.regressor import STANDARD_PARAMETERS, regressor, standard_parameters, unit
@@ -329,18 +333,6 @@ def _seconds(duration_s: float, errors: np.ndarray, values: np.ndarray) -> np.nd
     return duration_s * relative**2
 
 
-def joint_torque(motor_nm: np.ndarray, driving: np.ndarray, efficiency: float) -> np.ndarray:
-    """Joint-side torques τ_j, N·m, of motor torques τ_m (same shape): η τ_m where the
-    motor drives its load (``driving``), τ_m / η where the load drives it back
-    (:meth:`~spm_opt.model.actuator.Actuator.drive_torque` inverted)."""
-    return motor_nm * _gear_share(driving, efficiency)
-
-
-def _gear_share(driving: np.ndarray, efficiency: float) -> np.ndarray:
-    """τ_j / τ_m: η where the motor drives, 1 / η where it is driven back."""
-    return np.where(driving, efficiency, 1.0 / efficiency)
-
-
 @dataclass(frozen=True)
 class _Profile:
     """The weighted least squares at a given gear efficiency η and its misfit in motor
@@ -370,7 +362,7 @@ class _Profile:
 
     def target(self, efficiency: float) -> np.ndarray:
         """τ_j − τ_payload at η through the parallel filter (M, 2), N·m."""
-        joint = joint_torque(self.samples.torque, self.driving, efficiency)
+        joint = self.samples.joint_torque(self.driving, efficiency)
         return self.samples.parallel(joint - self.payload)
 
     def fit(self, efficiency: float) -> np.ndarray:
@@ -380,11 +372,14 @@ class _Profile:
         return np.linalg.lstsq(weighted, rhs, rcond=None)[0]
 
     def residual(self, efficiency: float) -> np.ndarray:
-        """The motor torques' residuals at η, τ_m − (Y_b β + τ_payload) / (τ_j / τ_m),
-        through the parallel filter and divided by the weights (M, 2)."""
-        joint = self.raw_columns @ self.fit(efficiency) + self.payload
-        motor = joint / _gear_share(self.driving, efficiency)
-        return self.samples.parallel(self.samples.torque - motor) / self.weights
+        """The residuals at η in motor torque, (τ_j − Y_b β − τ_payload) / (τ_j / τ_m) (τ_j
+        :meth:`~spm_opt.identify.samples.Samples.joint_torque`; without the torques' sides,
+        τ_m − (Y_b β + τ_payload) / (τ_j / τ_m)), through the parallel filter and divided by
+        the weights (M, 2)."""
+        error = self.samples.joint_torque(self.driving, efficiency) - self.payload
+        error -= self.raw_columns @ self.fit(efficiency)
+        motor = error / gear_share(self.driving, efficiency)
+        return self.samples.parallel(motor) / self.weights
 
     def misfit(self, efficiency: float) -> float:
         """Σ of the squared :meth:`residual` at η."""

@@ -12,7 +12,7 @@ from spm_opt.base.markdown import markdown_table
 from spm_opt.identify.estimate import Identification
 from spm_opt.identify.robot_file import efficiency_reason, efficiency_sentence
 from spm_opt.identify.samples import Samples
-from spm_opt.identify.validate import filtered_prediction
+from spm_opt.identify.validate import filtered_prediction, subset
 from spm_opt.model.params import Robot
 from spm_opt.model.regressor import STANDARD_PARAMETERS, standard_parameters, unit
 
@@ -118,15 +118,7 @@ def prediction_figure(
     for samples, held in stretches:
         every = dataclasses.replace(samples, min_speed_rad_s=0.0)
         for run, rate in zip(every.runs, every.rates_hz, strict=True):
-            part = dataclasses.replace(
-                every,
-                q=every.q[run],
-                qd=every.qd[run],
-                qdd=every.qdd[run],
-                torque=every.torque[run],
-                runs=[slice(0, run.stop - run.start)],
-                rates_hz=[rate],
-            )
+            part = subset(every, [(run, rate)])
             measured = part.parallel(part.torque)
             t = start + np.arange(len(measured)) * part.decimation / rate
             curves["t"].append(np.append(t, np.nan))

@@ -20,9 +20,11 @@ the noise of the current reads. A current read once a period goes with the rate 
 it, Present Velocity. A log's current is the mean of Present Current reads at the
 random instants spread over the period before each row (:mod:`spm_opt.execution.cycle`): it
 refers to the middle of the period, half a period before the row's time, and is
-resampled there. A log of one read a period (none between goals: logs from before the
-executor read more, or above 1 kHz) has no such delay, and at 100 Hz holds the velocity
-loop's ripple as a steady error: about −0.1 N·m·s/rad × q̇ on the simulated robot.
+resampled there, with its torques' two sides (the reads split by sign, for a gear train
+that loses: :meth:`Samples.joint_torque`). A log of one read a period (none between
+goals: logs from before the executor read more, or above 1 kHz) has no such delay, and at
+100 Hz holds the velocity loop's ripple as a steady error: about −0.1 N·m·s/rad × q̇ on the
+simulated robot.
 
 Identification then filters the torques and every column of the regressor built at those
 samples through the same low-pass filter, at ``cutoff_hz`` (Gautier's parallel
@@ -58,6 +60,14 @@ MEASURED = (
     "torque_theta2_nm",
 )
 """The log columns identification reads (with ``time_s``)."""
+SIDES = (
+    "torque_positive_theta1_nm",
+    "torque_positive_theta2_nm",
+    "torque_negative_theta1_nm",
+    "torque_negative_theta2_nm",
+)
+"""The columns of a torque's two sides, read where the log has them and its current is a
+period's mean (:attr:`Samples.sides`)."""
 FILTER_ORDER = 4
 STATE_CUTOFF_HZ = 10.0
 """Cutoff of the filter on the measured motion (at most 0.4 of the log's rate)."""
@@ -94,6 +104,10 @@ class Samples:
     single_read_logs : tuple of str
         The logs whose current is one read a period (no reads while a goal was held):
         at 100 Hz it holds the velocity loop's ripple as a steady error.
+    sides : ndarray, shape (N, 2, 2), or None
+        The torques' positive (``[:, 0]``) and negative (``[:, 1]``) sides, N·m, per joint:
+        the period's reads split by sign (:mod:`spm_opt.execution.cycle`); None unless
+        every log's current is a period's mean and holds them.
     """
 
     q: np.ndarray
@@ -106,6 +120,7 @@ class Samples:
     decimation: int
     min_speed_rad_s: float
     single_read_logs: tuple[str, ...] = ()
+    sides: np.ndarray | None = None
 
     @property
     def duration_s(self) -> float:
@@ -143,6 +158,26 @@ class Samples:
         """Samples the parallel filter keeps."""
         return int(np.sum(self._moving))
 
+    def joint_torque(self, driving: np.ndarray, efficiency: float) -> np.ndarray:
+        """The measured torques at the joints τ_j (N, 2), N·m, through a gear train of
+        efficiency η (the motor's τ_m: :meth:`~spm_opt.model.actuator.Actuator.drive_torque`
+        inverted). With :attr:`sides`: η times the side that turns the way the joint does
+        (the motor driving) plus the other side over η, whatever the torque does within
+        the period. Else η τ_m where the motor drives its load (``driving``, (N, 2) bool),
+        τ_m / η where the load drives it back."""
+        if self.sides is None:
+            return self.torque * gear_share(driving, efficiency)
+        positive, negative = self.sides[:, 0], self.sides[:, 1]
+        forward = self.qd > 0.0
+        drives = np.where(forward, positive, negative)
+        driven = np.where(forward, negative, positive)
+        return efficiency * drives + driven / efficiency
+
+
+def gear_share(driving: np.ndarray, efficiency: float) -> np.ndarray:
+    """τ_j / τ_m: η where the motor drives, 1 / η where it is driven back."""
+    return np.where(driving, efficiency, 1.0 / efficiency)
+
 
 def log_samples(
     paths: list[Path], cutoff_hz: float, decimation: int | None, min_speed_rad_s: float
@@ -161,9 +196,10 @@ def log_samples(
         raise InputError(
             f"logs {named(paths)}: no run of {MIN_RUN_SAMPLES} complete samples or more"
         )
+    with_sides = all(reads and values.shape[1] > len(MEASURED) for _, _, values, reads in runs)
     parts, slices, rates, start = [], [], [], 0
     for path, t, values, reads in runs:
-        rate, uniform = _uniform(path, t, values, reads)
+        rate, uniform = _uniform(path, t, values if with_sides else values[:, :6], reads)
         if not 0.0 < cutoff_hz < 0.5 * rate:
             raise InputError(
                 f"--cutoff-hz {cutoff_hz:g}: must lie between 0 and half the log's rate "
@@ -174,7 +210,7 @@ def log_samples(
         if reads:  # the period's mean rate, as the current is the period's mean
             motion[:, 2:4] = np.gradient(motion[:, 0:2], 1.0 / rate, axis=0)
         qdd = np.gradient(motion[:, 2:4], 1.0 / rate, axis=0)
-        parts.append(np.hstack([motion, qdd, uniform[:, 4:6]]))
+        parts.append(np.hstack([motion, qdd, uniform[:, 4:]]))
         slices.append(slice(start, start + len(uniform)))
         rates.append(rate)
         start += len(uniform)
@@ -192,15 +228,17 @@ def log_samples(
         decimation=decimation,
         min_speed_rad_s=min_speed_rad_s,
         single_read_logs=tuple(dict.fromkeys(str(path) for path, *_, reads in runs if not reads)),
+        sides=table[:, 8:12].reshape(-1, 2, 2) if with_sides else None,
     )
 
 
 def _runs(path: Path) -> list[tuple[Path, np.ndarray, np.ndarray, int]]:
-    """(path, time (n,), measurements (n, 6), current reads a period) of each run of
-    complete samples."""
+    """(path, time (n,), measurements (n, 6, or 10 with the torques' :data:`SIDES`), current
+    reads a period) of each run of complete samples."""
     table, header = read_execution_log(path)
     t = log_values(table, ("time_s",), path)[:, 0]
-    values = log_values(table, MEASURED, path)
+    columns = MEASURED + SIDES if set(SIDES) <= set(table.columns) else MEASURED
+    values = log_values(table, columns, path)
     complete = np.all(np.isfinite(values), axis=1) & np.isfinite(t)
     reads = current_reads_per_cycle(header)
     runs = []

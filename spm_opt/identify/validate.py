@@ -20,7 +20,7 @@ import numpy as np
 
 from spm_opt.base.errors import InputError
 from spm_opt.execution.log import header_path
-from spm_opt.identify.samples import MIN_RUN_SAMPLES, Samples
+from spm_opt.identify.samples import MIN_RUN_SAMPLES, Samples, gear_share
 from spm_opt.model import dynamics
 from spm_opt.model.base_parameters import SAMPLES, base_parameters, random_states
 from spm_opt.model.params import Robot
@@ -87,10 +87,10 @@ def hold_out(
             held.insert(0, (slice(cut, run.stop), rate))
     if not held or not fitted:
         return samples, None
-    return _subset(samples, fitted), _subset(samples, held)
+    return subset(samples, fitted), subset(samples, held)
 
 
-def _subset(samples: Samples, runs: list[tuple[slice, float]]) -> Samples:
+def subset(samples: Samples, runs: list[tuple[slice, float]]) -> Samples:
     """The samples of ``runs`` (slices into ``samples``' rows, each with its rate, Hz), each
     a run of its own."""
     rows = np.concatenate([np.arange(run.start, run.stop) for run, _ in runs])
@@ -101,21 +101,25 @@ def _subset(samples: Samples, runs: list[tuple[slice, float]]) -> Samples:
         qd=samples.qd[rows],
         qdd=samples.qdd[rows],
         torque=samples.torque[rows],
+        sides=None if samples.sides is None else samples.sides[rows],
         runs=[slice(int(a), int(b)) for a, b in zip(starts[:-1], starts[1:], strict=True)],
         rates_hz=[rate for _, rate in runs],
     )
 
 
 def joined(parts: list[Samples]) -> Samples:
-    """The samples of several logs (same filter settings) as one."""
+    """The samples of several logs (same filter settings) as one (the torques' sides only
+    if every part has them)."""
     first = parts[0]
     offsets = np.cumsum([0] + [len(part.q) for part in parts])
+    sides = [part.sides for part in parts]
     return dataclasses.replace(
         first,
         **{
             name: np.concatenate([getattr(part, name) for part in parts])
             for name in ("q", "qd", "qdd", "torque")
         },
+        sides=None if any(side is None for side in sides) else np.concatenate(sides),
         runs=[
             slice(run.start + int(offset), run.stop + int(offset))
             for part, offset in zip(parts, offsets, strict=False)
@@ -133,8 +137,21 @@ def filtered_prediction(robot: Robot, samples: Samples) -> np.ndarray:
 
 def prediction_rms(robot: Robot, samples: Samples) -> np.ndarray:
     """RMS of measured − predicted torque per joint (2,), N·m, both through the parallel
-    filter (:func:`filtered_prediction`)."""
-    error = samples.parallel(samples.torque) - filtered_prediction(robot, samples)
+    filter (:func:`filtered_prediction`). Where the samples hold the torques' sides and the
+    robot's gear train loses, as identification measures it: the measured torque at the
+    joints (:meth:`~spm_opt.identify.samples.Samples.joint_torque`, at the robot's η) less
+    the model's, in motor torque (over the share η or 1 / η the model's torque gives)."""
+    efficiency = robot.actuator.gear_efficiency
+    if samples.sides is None or efficiency == 1.0:
+        error = samples.parallel(samples.torque) - filtered_prediction(robot, samples)
+    else:
+        lossless = dataclasses.replace(
+            robot, actuator=dataclasses.replace(robot.actuator, gear_efficiency=1.0)
+        )
+        joint = dynamics.actuator_torque(lossless, samples.q, samples.qd, samples.qdd)
+        driving = joint * samples.qd > 0.0
+        measured = samples.joint_torque(driving, efficiency)
+        error = samples.parallel((measured - joint) / gear_share(driving, efficiency))
     return np.sqrt(np.mean(error**2, axis=0))
 
 

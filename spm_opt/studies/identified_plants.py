@@ -77,12 +77,13 @@ class PlantIdentification:
 
     def model_holds(self) -> bool:
         """Whether the plant's own model predicts its validation torques within the noise
-        (:data:`NOISE_ROOM` times :data:`NOISE_FLOOR_NM`). Where a gear train loses (η < 1),
-        the velocity loop's answer to each goal step swings the motor's torque through the
-        loss's two sides within the period, so the period's mean current is not the
-        model's for the period's mean motion: measured on one plant (η 0.755, ωv 227 1/s),
-        the plant's own model predicted joint 2 to 0.016 N·m at 100 Hz, 0.0061 at 500 Hz,
-        0.0054 with ωv 60 1/s."""
+        (:data:`NOISE_ROOM` times :data:`NOISE_FLOOR_NM`), as identification measures them
+        (:func:`~spm_opt.identify.validate.prediction_rms`). Where a gear train loses
+        (η < 1), the velocity loop's answer to each goal step swings the motor's torque
+        through the loss's two sides within the period; the log's sides of the reads keep
+        that apart (on a plant with η 0.75 and ωv 227 1/s, 30 s of excitation, the plant's
+        own model predicted its log's torques to 0.0054 and 0.0055 N·m with them, 0.0100
+        and 0.0077 from the mean torque alone)."""
         return bool(np.all(self.plant_rms <= NOISE_ROOM * NOISE_FLOOR_NM))
 
     def prediction_gain(self) -> np.ndarray:
