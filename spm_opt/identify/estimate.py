@@ -91,7 +91,7 @@ from spm_opt.identify.physical_robot import (
     robot_with_parameters,
     standard_estimate,
 )
-from spm_opt.identify.samples import Samples, correlation_factor, gear_share
+from spm_opt.identify.samples import Samples, correlation_factor
 from spm_opt.model.base_parameters import BaseParameters, base_parameters
 from spm_opt.model.params import Robot
 from spm_opt.model.regressor import STANDARD_PARAMETERS, regressor, standard_parameters, unit
@@ -376,9 +376,8 @@ class _Profile:
         :meth:`~spm_opt.identify.samples.Samples.joint_torque`; without the torques' sides,
         τ_m − (Y_b β + τ_payload) / (τ_j / τ_m)), through the parallel filter and divided by
         the weights (M, 2)."""
-        error = self.samples.joint_torque(self.driving, efficiency) - self.payload
-        error -= self.raw_columns @ self.fit(efficiency)
-        motor = error / gear_share(self.driving, efficiency)
+        joint = self.raw_columns @ self.fit(efficiency) + self.payload
+        motor = self.samples.motor_error(self.driving, efficiency, joint)
         return self.samples.parallel(motor) / self.weights
 
     def misfit(self, efficiency: float) -> float:

@@ -166,15 +166,24 @@ class Samples:
         the period. Else η τ_m where the motor drives its load (``driving``, (N, 2) bool),
         τ_m / η where the load drives it back."""
         if self.sides is None:
-            return self.torque * gear_share(driving, efficiency)
+            return self.torque * _gear_share(driving, efficiency)
         positive, negative = self.sides[:, 0], self.sides[:, 1]
         forward = self.qd > 0.0
         drives = np.where(forward, positive, negative)
         driven = np.where(forward, negative, positive)
         return efficiency * drives + driven / efficiency
 
+    def motor_error(
+        self, driving: np.ndarray, efficiency: float, model_joint_nm: np.ndarray
+    ) -> np.ndarray:
+        """The measured joint torques (:meth:`joint_torque`) less a model's
+        ``model_joint_nm`` (N, 2), in motor torque: over the share η or 1 / η (``driving``)."""
+        return (self.joint_torque(driving, efficiency) - model_joint_nm) / _gear_share(
+            driving, efficiency
+        )
 
-def gear_share(driving: np.ndarray, efficiency: float) -> np.ndarray:
+
+def _gear_share(driving: np.ndarray, efficiency: float) -> np.ndarray:
     """τ_j / τ_m: η where the motor drives, 1 / η where it is driven back."""
     return np.where(driving, efficiency, 1.0 / efficiency)
 

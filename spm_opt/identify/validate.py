@@ -20,7 +20,7 @@ import numpy as np
 
 from spm_opt.base.errors import InputError
 from spm_opt.execution.log import header_path
-from spm_opt.identify.samples import MIN_RUN_SAMPLES, Samples, gear_share
+from spm_opt.identify.samples import MIN_RUN_SAMPLES, Samples
 from spm_opt.model import dynamics
 from spm_opt.model.base_parameters import SAMPLES, base_parameters, random_states
 from spm_opt.model.params import Robot
@@ -149,9 +149,7 @@ def prediction_rms(robot: Robot, samples: Samples) -> np.ndarray:
             robot, actuator=dataclasses.replace(robot.actuator, gear_efficiency=1.0)
         )
         joint = dynamics.actuator_torque(lossless, samples.q, samples.qd, samples.qdd)
-        driving = joint * samples.qd > 0.0
-        measured = samples.joint_torque(driving, efficiency)
-        error = samples.parallel((measured - joint) / gear_share(driving, efficiency))
+        error = samples.parallel(samples.motor_error(joint * samples.qd > 0.0, efficiency, joint))
     return np.sqrt(np.mean(error**2, axis=0))
 
 
