@@ -63,21 +63,33 @@ def test_each_part_of_a_hold_is_read_once_and_the_log_holds_their_mean(hardware_
         assert deadline == pytest.approx(written_at + period, abs=1e-9)
         parts = [(time - written_at) / (period / READS) for _, time, _ in between[:READS]]
         assert [int(np.floor(p + 1e-9)) for p in parts] == list(range(READS)), parts
-        logged.append(np.array([current for _, _, current in between[:READS]]))
-    # the log's current is those reads' mean (the write takes no time: the own read's
-    # share is 0), and its torque's sides the mean of the reads' torques above zero and
-    # below it, per joint
+        logged.append(np.array([current for _, _, current in between[: READS + 1]]))
+    # the log's current is the held reads' mean (the write takes no time: the own read's
+    # share is 0), and its torque's sides the means of the held reads' torques on the
+    # positive side and on the negative: a read of two units or more by its own sign, one
+    # nearer zero by the sum of up to two reads before it and as many after it among the
+    # held reads and the cycle's own (its own sign if they sum to zero, or it has none)
     currents = table[["current_theta1_a", "current_theta2_a"]].to_numpy()
     rows = np.flatnonzero(np.isfinite(currents[:, 0]))[1 : len(logged) + 1]
-    np.testing.assert_allclose(currents[rows], [r.mean(axis=0) for r in logged], atol=1e-12)
-    torque_map = hardware_problem.robot.actuator.current_map
-    for side, keep in (("positive", lambda t: t > 0.0), ("negative", lambda t: t < 0.0)):
+    held_means = [reads[:READS].mean(axis=0) for reads in logged]
+    np.testing.assert_allclose(currents[rows], held_means, atol=1e-12)
+    actuator = hardware_problem.robot.actuator
+    expected = {"positive": [], "negative": []}
+    for reads in logged:
+        units = np.rint(reads / actuator.current_unit_a).astype(int)
+        torques = actuator.current_map.torque(reads)
+        sums = {"positive": [0.0, 0.0], "negative": [0.0, 0.0]}
+        for i in range(READS):
+            for j in (0, 1):
+                reach = min(i, READS - i, 2)  # as many on each side, the own read last
+                around = sum(units[k, j] for k in range(i - reach, i + reach + 1) if k != i)
+                judged = units[i, j] if abs(units[i, j]) >= 2 or around == 0 else around
+                sums["positive" if judged > 0 else "negative"][j] += torques[i, j] / READS
+        for side in sums:
+            expected[side].append(sums[side])
+    for side, values in expected.items():
         columns = [f"torque_{side}_theta{joint}_nm" for joint in (1, 2)]
-        expected = []
-        for reads in logged:
-            torques = torque_map.torque(reads)
-            expected.append([sum(t for t in torques[:, j] if keep(t)) / READS for j in (0, 1)])
-        np.testing.assert_allclose(table[columns].to_numpy()[rows], expected, atol=1e-8)
+        np.testing.assert_allclose(table[columns].to_numpy()[rows], values, atol=1e-8)
     crossing = np.sum(
         (table["torque_positive_theta1_nm"] > 0) & (table["torque_negative_theta1_nm"] < 0)
     )

@@ -26,8 +26,9 @@ whose current is constant over each 1 ms step, 10 reads at 100 Hz read every ste
 The mean refers to about the middle of the period, half a period before the cycle's time
 (:mod:`spm_opt.identify.samples`).
 
-The same reads' torques are also logged split by sign, the mean of their positive parts
-and of their negative parts. Where a gear train loses (η < 1), the load gets η τ from a
+The same reads' torques are also logged in two sides, positive and negative, each read on
+the side its neighbours' sign gives (:mod:`spm_opt.execution.torque_sides`; the cycle's own
+read last among them). Where a gear train loses (η < 1), the load gets η τ from a
 motor that drives it and τ / η from one it drives back, and the velocity loop's answer to
 each goal step swings the motor's torque across zero within the period: on the simulated
 robot with η 0.75 and a velocity loop of 227 1/s (``problems/identification.toml``'s
@@ -50,6 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spm_opt.base.errors import CommunicationError
+from spm_opt.execution import torque_sides
 from spm_opt.execution.backend import Backend, Clock, Measurement, hardware_error_names
 from spm_opt.execution.feed import FeedRequests, Pace
 from spm_opt.execution.log import LogWriter
@@ -109,9 +111,8 @@ class Cycle:
     held_current: tuple[np.ndarray, float, float] | None = None
     """The mean Present Current (A) of the reads while the last goal was held, and the
     span they covered, from that goal's write to its end (s, on the clock)."""
-    held_sides: tuple[np.ndarray, np.ndarray] | None = None
-    """The same reads' torques (N·m) split by sign: the mean of their positive parts and
-    of their negative parts (each (2,); their sum is the mean of the reads' torques)."""
+    held_reads: np.ndarray | None = None
+    """The same reads (k, 2), A, in the order they were made."""
     written_at: float | None = None
     """When this cycle's goal write returned, on the clock (s)."""
     following_error: np.ndarray | None = None
@@ -189,6 +190,7 @@ class ControlLoop:
         self._backend, self._lead, self._writer = backend, lead, writer
         self._requests = requests
         self._torque_map = problem.robot.actuator.current_map
+        self._current_unit_a = problem.robot.actuator.current_unit_a
         self._plan_duration = plan_duration_s
         # the loop starts now, with its log's files written (the header's origin follows)
         self.ticker = Ticker(backend.clock, 1.0 / settings.rate_hz)
@@ -215,7 +217,7 @@ class ControlLoop:
         cycle = Cycle(self.ticker.wait())
         if currents:
             cycle.held_current = (np.mean(currents, axis=0), *span)
-            cycle.held_sides = self._sides(np.array(currents))
+            cycle.held_reads = np.array(currents)
         if unexpected is not None:
             cycle.notes.append(self._failure("current read", unexpected, cycle))
         try:
@@ -388,10 +390,9 @@ class ControlLoop:
             held_mean = None if cycle.held_current is None else cycle.held_current[0]
             current = self._over_hold(cycle, own, held_mean)
             torque = self._torque_map.torque(current)
-            held = cycle.held_sides or (None, None)
             sides = [
-                self._over_hold(cycle, part, held_part)
-                for part, held_part in zip(self._sides(own[None, :]), held, strict=True)
+                self._over_hold(cycle, own_part, held_part)
+                for own_part, held_part in zip(*self._sides(cycle.held_reads, own), strict=True)
             ]
             values = (measurement.position_rad, measurement.velocity_rad_s, current, torque, *sides)
             self._writer.append(
@@ -406,11 +407,20 @@ class ControlLoop:
             )
         self._update_status(phase, cycle, torque)
 
-    def _sides(self, currents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Reads' torques (currents (k, 2), A, through the map) split by sign: the means of
-        their positive and of their negative parts (2,), N·m."""
-        torques = self._torque_map.torque(currents)
-        return np.mean(np.maximum(torques, 0.0), axis=0), np.mean(np.minimum(torques, 0.0), axis=0)
+    def _sides(
+        self, held: np.ndarray | None, own: np.ndarray
+    ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray | None, np.ndarray | None]]:
+        """The torques' positive and negative sides (:mod:`spm_opt.execution.torque_sides`),
+        N·m, each (2,): of the cycle's own read (currents ``own`` (2,), A) and of the
+        reads while the last goal was held (``held`` (k, 2), A, or None: then None), the own
+        read last in their order."""
+        reads = own[None, :] if held is None else np.vstack([held, own])
+        torques = self._torque_map.torque(reads)
+        shares = torque_sides.side_shares(reads, self._current_unit_a)
+        own_sides = torque_sides.sides(torques[-1:], shares[-1:])
+        if held is None:
+            return own_sides, (None, None)
+        return own_sides, torque_sides.sides(torques[:-1], shares[:-1])
 
     @staticmethod
     def _over_hold(cycle: Cycle, own: np.ndarray, held: np.ndarray | None) -> np.ndarray:

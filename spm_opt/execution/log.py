@@ -80,8 +80,8 @@ approach's or the stop's profile, the position held) and the goals: what the act
 hold after the cycle, the reference led by the position loop's lag (see
 :mod:`spm_opt.execution.tracking`; a failed write leaves the last reference and goal
 delivered); ``torque_positive_*`` and ``torque_negative_*``: the Present Current reads'
-torques behind ``torque_*`` split by sign, the means of their positive and of their
-negative parts (:mod:`spm_opt.execution.cycle`); measured values are empty in a cycle
+torques behind ``torque_*`` in two sides, each read on the side its neighbours' sign gives
+(:mod:`spm_opt.execution.torque_sides`); measured values are empty in a cycle
 whose read failed."""
 
 LINE_BYTES = 384

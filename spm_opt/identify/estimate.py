@@ -16,9 +16,10 @@ sides through the same low-pass filter (parallel filtering). τ_j is the torque 
 joints; the actuators measure the motor's, τ_m, and through a gear train of efficiency η,
 τ_j = η τ_m where the motor drives its load and τ_m / η where the load drives it back
 (:meth:`~spm_opt.model.actuator.Actuator.drive_torque`). A log whose current is a
-period's mean holds its reads split by sign: τ_j is η times the side that turns the way
-the joint does plus the other over η, exact however the velocity loop swings the torque
-within the period (:meth:`~spm_opt.identify.samples.Samples.joint_torque`). Where the model
+period's mean holds its reads' two sides (:mod:`spm_opt.execution.torque_sides`): τ_j is
+η times the side that turns the way the joint does plus the other over η, however the
+velocity loop swings the torque within the period
+(:meth:`~spm_opt.identify.samples.Samples.joint_torque`). Where the model
 decides which of the two (a log without the sides, and to express residuals in motor
 torque): where the joint torque of a fit with η = 1 has the rate's sign (the measured
 torque's own sign is noise near zero, and smears a joint's Coulomb step at a reversal).

@@ -20,11 +20,11 @@ the noise of the current reads. A current read once a period goes with the rate 
 it, Present Velocity. A log's current is the mean of Present Current reads at the
 random instants spread over the period before each row (:mod:`spm_opt.execution.cycle`): it
 refers to the middle of the period, half a period before the row's time, and is
-resampled there, with its torques' two sides (the reads split by sign, for a gear train
-that loses: :meth:`Samples.joint_torque`). A log of one read a period (none between
-goals: logs from before the executor read more, or above 1 kHz) has no such delay, and at
-100 Hz holds the velocity loop's ripple as a steady error: about −0.1 N·m·s/rad × q̇ on the
-simulated robot.
+resampled there, with its torques' two sides (the reads split into the side that drives
+and the side driven back, for a gear train that loses: :meth:`Samples.joint_torque`). A
+log of one read a period (none between goals: logs from before the executor read more, or
+above 1 kHz) has no such delay, and at 100 Hz holds the velocity loop's ripple as a steady
+error: about −0.1 N·m·s/rad × q̇ on the simulated robot.
 
 Identification then filters the torques and every column of the regressor built at those
 samples through the same low-pass filter, at ``cutoff_hz`` (Gautier's parallel
@@ -106,7 +106,8 @@ class Samples:
         at 100 Hz it holds the velocity loop's ripple as a steady error.
     sides : ndarray, shape (N, 2, 2), or None
         The torques' positive (``[:, 0]``) and negative (``[:, 1]``) sides, N·m, per joint:
-        the period's reads split by sign (:mod:`spm_opt.execution.cycle`); None unless
+        the period's reads split by their neighbours' sign
+        (:mod:`spm_opt.execution.torque_sides`); None unless
         every log's current is a period's mean and holds them.
     """
 
