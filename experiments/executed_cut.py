@@ -11,7 +11,11 @@ equal to the plan (``--tracking none``) and once led by the loops' lag (``lead``
 is judged by the evaluator on its log and on the plant's true state
 (:func:`spm_opt.verify.executed_cut.evaluate_log`): did it complete, how far the joints
 were from the plan (the true tracking error) and how far the true cut was from the
-contour. ``--backend emulator`` runs the same through the real Dynamixel SDK against the
+contour. Beside each run, the cut predicted before it
+(:func:`spm_opt.verify.predicted_cut.predict_cut`) with the plant's own file as the model:
+its loops are the file's (the default ωv of 150 1/s), while the plant runs the control
+table's default gains (ωv 87 and 116 1/s on that plant), a mismatch a lab has too, as no
+log identifies ωv. ``--backend emulator`` runs the same through the real Dynamixel SDK against the
 emulated actuators, in real time (about two minutes; keep the machine otherwise idle:
 a loop that stalls for 0.2 s is a following error). Writes ``executed_cut.md``,
 ``executed_cut.json`` and ``executed_cut.png`` into ``--out``.
@@ -40,6 +44,7 @@ from spm_opt.judge.limits import contour_tube
 from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.planner_style import labelled_handles
 from spm_opt.verify.executed_cut import evaluate_log
+from spm_opt.verify.predicted_cut import predict_cut
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")
@@ -65,6 +70,7 @@ class Row:
     true_tracking_error_deg: float
     measured_tracking_error_deg: float
     true_deviation_mm: float
+    predicted_deviation_mm: float
     tube_mm: float | None
     violations: int
 
@@ -114,6 +120,7 @@ def run_one(
     reports = evaluate_log(problem, log, trace)
     true = reports.true
     assert true is not None
+    predicted = predict_cut(problem, plan, plant[1], settings)
     tube = contour_tube(problem, executed=True)
     return Row(
         problem=problem.name,
@@ -126,6 +133,7 @@ def run_one(
         true_tracking_error_deg=max(true.max_tracking_error_deg),
         measured_tracking_error_deg=max(reports.measured.max_tracking_error_deg),
         true_deviation_mm=true.max_contour_deviation_mm,
+        predicted_deviation_mm=predicted.deviation_mm,
         tube_mm=None if tube is None else tube / MM,
         violations=len(true.violations),
     )
@@ -148,7 +156,8 @@ def run(kind: str, problems: list[str], planners: list[str], work: Path) -> list
                         f"{problem_name} {planner} ({plant[0]}, {tracking}): "
                         f"{'completed' if row.completed else row.outcome}; tracking "
                         f"{row.true_tracking_error_deg:.3f} deg, cut "
-                        f"{row.true_deviation_mm:.3f} mm",
+                        f"{row.true_deviation_mm:.3f} mm (predicted "
+                        f"{row.predicted_deviation_mm:.3f})",
                         file=sys.stderr,
                         flush=True,
                     )
@@ -176,6 +185,8 @@ def table(rows: list[Row]) -> str:
                 f"{lead.planned_deviation_mm:.3f}",
                 f"{none.true_deviation_mm:.3f}",
                 f"{lead.true_deviation_mm:.3f}",
+                f"{lead.predicted_deviation_mm:.3f}",
+                f"{lead.predicted_deviation_mm - lead.true_deviation_mm:+.3f}",
                 "—" if lead.tube_mm is None else f"{lead.tube_mm:g}",
             )
         )
@@ -190,6 +201,8 @@ def table(rows: list[Row]) -> str:
         "planned cut off the contour (mm)",
         "true cut off the contour, none (mm)",
         "true cut off the contour, lead (mm)",
+        "predicted, lead (mm)",
+        "predicted less true, lead (mm)",
         "tube (mm)",
     )
     return "\n".join(markdown_table(header, lines))
@@ -236,7 +249,8 @@ def _tracking_bars(axis: Axes, rows: list[Row]) -> None:
 
 def _cut_bars(axis: Axes, rows: list[Row]) -> None:
     """The plan's and the true cuts' largest distance from the contour per planner (mm, log
-    scale, at least :data:`FLOOR_MM`), and the tube if the problem has one."""
+    scale, at least :data:`FLOOR_MM`), the predicted cut's with the lead, and the tube if
+    the problem has one."""
     planners = list(dict.fromkeys(r.planner for r in rows))
     x = np.arange(len(planners))
     planned = [_value(rows, p, "lead", "planned_deviation_mm") for p in planners]
@@ -250,6 +264,14 @@ def _cut_bars(axis: Axes, rows: list[Row]) -> None:
     for offset, tracking in ((0.0, "none"), (0.27, "lead")):
         values = [_value(rows, p, tracking, "true_deviation_mm") for p in planners]
         axis.bar(x + offset, np.maximum(values, FLOOR_MM), 0.27, color=_COLOURS[tracking])
+    predicted = [_value(rows, p, "lead", "predicted_deviation_mm") for p in planners]
+    axis.plot(
+        x + 0.27,
+        np.maximum(predicted, FLOOR_MM),
+        "kD",
+        markersize=6,
+        label="predicted before the run (lead)",
+    )
     tube = rows[0].tube_mm
     if tube is not None:
         axis.axhline(tube, color="black", linestyle="--", linewidth=1, label="tube")

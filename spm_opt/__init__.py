@@ -6,6 +6,7 @@ for brain surgery.
     trajectory = so.plan(problem, planner="cubic")
     report = so.evaluate(problem, trajectory)
     table = so.compare(problem)  # every planner, one row each (a pandas DataFrame)
+    predicted = so.predict_cut(problem, trajectory)  # the closed-loop model's true cut
     result = so.execute(trajectory, backend=so.SimulatedRobot(problem.robot,
                         start_rad=trajectory.position(0.0)), problem=problem, log="run.csv")
 
@@ -40,6 +41,7 @@ if TYPE_CHECKING:
     from spm_opt.studies.comparison import compare
     from spm_opt.studies.sweep.results import load_sweep
     from spm_opt.verify.judgement import evaluate
+    from spm_opt.verify.predicted_cut import predict_cut
 
 _HOMES = {
     "compare": "spm_opt.studies.comparison",
@@ -61,6 +63,7 @@ _HOMES = {
     "Problem": "spm_opt.problem.problem",
     "load_problem": "spm_opt.problem.problem",
     "load_sweep": "spm_opt.studies.sweep.results",
+    "predict_cut": "spm_opt.verify.predicted_cut",
     "Trajectory": "spm_opt.problem.trajectory",
 }
 """The module each lazily imported name comes from."""
@@ -111,5 +114,6 @@ __all__ = [
     "load_robot",
     "load_sweep",
     "plan",
+    "predict_cut",
     "read_log",
 ]

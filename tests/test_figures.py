@@ -532,6 +532,7 @@ def test_the_executed_cut_experiment_shows_the_cut_too(tmp_path: Path) -> None:
             true_tracking_error_deg=0.1 if tracking == "lead" else 0.3,
             measured_tracking_error_deg=0.1,
             true_deviation_mm=0.09,
+            predicted_deviation_mm=0.085,
             tube_mm=tube,
             violations=0,
         )

@@ -15,8 +15,12 @@ from spm_opt.base.output_paths import check_output_directory, check_output_file
 from spm_opt.cli.parser import PLAN_MAX_RATE_HZ
 
 if TYPE_CHECKING:
-    from spm_opt.execution import ExecutionResult
+    from spm_opt.execution import ExecutionResult, ExecutionSettings
     from spm_opt.judge.report import Report
+    from spm_opt.model.params import Robot
+    from spm_opt.problem.problem import Problem
+    from spm_opt.problem.trajectory import Trajectory
+    from spm_opt.verify.predicted_cut import PredictedCut
 
 _LOG = logging.getLogger("spm_opt.cli")  # the command line's logger, whichever module logs
 
@@ -43,20 +47,17 @@ def _execute(args: argparse.Namespace) -> None:
     from spm_opt.problem.problem import load_problem
     from spm_opt.problem.trajectory import Trajectory
 
-    try:
-        settings = ExecutionSettings(
-            rate_hz=args.rate,
-            approach=args.approach,
-            feed=args.feed,
-            max_feed=max(ExecutionSettings.max_feed, args.feed),
-            max_hold_s=args.max_hold,
-            other_problem=args.other_problem,
-            tracking=args.tracking,
-            current_reads_per_cycle=_current_reads(args),
-        )
-    except InputError as error:  # name the option the user gave, not the setting
-        setting = str(error).split(" = ")[0]
-        raise InputError(f"{_SETTING_OPTIONS.get(setting, setting)}: {error}") from None
+    settings = _settings(
+        ExecutionSettings,
+        rate_hz=args.rate,
+        approach=args.approach,
+        feed=args.feed,
+        max_feed=max(ExecutionSettings.max_feed, args.feed),
+        max_hold_s=args.max_hold,
+        other_problem=args.other_problem,
+        tracking=args.tracking,
+        current_reads_per_cycle=_current_reads(args),
+    )
     if args.trace is not None and (args.backend != "sim" or args.trace.suffix != ".npz"):
         raise InputError(
             f"--trace {args.trace}: expected a file name ending in .npz, with --backend sim "
@@ -67,6 +68,7 @@ def _execute(args: argparse.Namespace) -> None:
         check_output_file(args.trace, "--trace")
     problem = load_problem(args.problem)
     trajectory = Trajectory.from_csv(args.plan)
+    _check_predicted_cut(problem, trajectory, settings, args.predicted_outside)
     keys = _keys_terminal(args.interactive)
     if args.backend == "sim":
         start = trajectory.position(trajectory.start_time)
@@ -101,6 +103,87 @@ def _execute(args: argparse.Namespace) -> None:
         raise GateFailed(_outcome(result))
 
 
+def _check_predicted_cut(
+    problem: Problem, trajectory: Trajectory, settings: ExecutionSettings, outside: str
+) -> None:
+    """Pre-flight's prediction: with a contour tolerance, run ``trajectory`` through the
+    closed-loop model of the problem's robot; a predicted cut outside the tube (or a
+    predicted run that does not complete) refuses the run, or with ``outside`` "warn" is
+    said and run."""
+    from spm_opt.base.errors import PreflightError
+    from spm_opt.judge.limits import contour_tube
+    from spm_opt.verify.predicted_cut import predict_cut
+
+    if contour_tube(problem, executed=True) is None or trajectory.metadata.get("ignores_contour"):
+        return
+    _LOG.info("pre-flight: predicting the cut on the closed-loop model of %s", problem.robot.name)
+    predicted = predict_cut(problem, trajectory, settings=settings)
+    if predicted.inside:
+        _LOG.info("pre-flight: %s", predicted.summary())
+    elif outside == "warn":
+        _LOG.warning("%s; run all the same (--predicted-outside warn)", predicted.summary())
+    else:
+        raise PreflightError(
+            f"plan refused: {predicted.summary()} (spm-opt predict --highest-feed finds the "
+            "highest feed that keeps it inside; --predicted-outside warn runs it all the same)"
+        )
+
+
+def _predict(args: argparse.Namespace) -> None:
+    from spm_opt.execution import ExecutionSettings
+    from spm_opt.model.params import load_robot
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.problem.trajectory import Trajectory
+    from spm_opt.verify.predicted_cut import predict_cut
+
+    settings = _settings(
+        ExecutionSettings,
+        rate_hz=args.rate,
+        feed=args.feed,
+        max_feed=max(ExecutionSettings.max_feed, args.feed),
+        other_problem=args.other_problem,
+        tracking=args.tracking,
+    )
+    problem = load_problem(args.problem)
+    robot = None if args.robot is None else load_robot(args.robot)
+    trajectory = Trajectory.from_csv(args.plan)
+    if args.highest_feed:
+        predicted = _report_highest_feed(problem, trajectory, robot, settings)
+    else:
+        predicted = predict_cut(problem, trajectory, robot, settings)
+    if args.json:
+        print(json.dumps({"summary": predicted.summary(), **predicted.report.to_dict()}, indent=2))
+    else:
+        print(f"{predicted.summary()}\n\n{predicted.report.to_markdown()}", end="")
+    fault = _faults("predicted", predicted.report)
+    if fault or not predicted.inside:
+        raise GateFailed(fault or predicted.summary())
+
+
+def _report_highest_feed(
+    problem: Problem, trajectory: Trajectory, robot: Robot | None, settings: ExecutionSettings
+) -> PredictedCut:
+    """``predict --highest-feed``: the highest feed whose predicted cut stays in the tube,
+    each feed tried on stderr; returns the prediction at ``settings``' feed."""
+    from spm_opt.verify.predicted_cut import highest_feed_inside
+
+    predictions: dict[float, PredictedCut] = {}
+
+    def tried(feed: float, predicted: PredictedCut) -> None:
+        predictions[feed] = predicted
+        print(f"feed {feed:.2f}: {predicted.summary()}", file=sys.stderr, flush=True)
+
+    found = highest_feed_inside(problem, trajectory, robot, settings, tried)
+    if found is None:
+        print("no feed down to 0.1 keeps the predicted cut in the tube", file=sys.stderr)
+    else:
+        print(
+            f"highest feed that keeps the predicted cut in the tube: {found[0]:.2f}",
+            file=sys.stderr,
+        )
+    return predictions[settings.feed]
+
+
 SIMULATED_CURRENT_READS = 10
 """``execute --current-reads`` on the simulated robot by default: one read in each 1 ms
 step of the plant at 100 Hz, whose mean is the period's current; reads there cost no bus
@@ -128,6 +211,15 @@ _SETTING_OPTIONS = {
     "tracking": "--tracking",
 }
 """The execute option that sets each :class:`~spm_opt.execution.ExecutionSettings` field."""
+
+
+def _settings(kind: type[ExecutionSettings], **values: object) -> ExecutionSettings:
+    """The executor's settings from the options; a bad one named by its option."""
+    try:
+        return kind(**values)
+    except InputError as error:  # name the option the user gave, not the setting
+        setting = str(error).split(" = ")[0]
+        raise InputError(f"{_SETTING_OPTIONS.get(setting, setting)}: {error}") from None
 
 
 def _outcome(result: ExecutionResult) -> str:
@@ -449,6 +541,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], None]] = {
     "identify": _identify,
     "review": _review,
     "execute": _execute,
+    "predict": _predict,
     "emulate": _emulate,
     "sweep": _sweep,
     "cache": _cache,

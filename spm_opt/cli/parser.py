@@ -14,6 +14,7 @@ from spm_opt.base.choices import (
     CONTOUR_PLANNER_NAMES,
     DEFAULT_MAX_TASKS,
     PLANNER_NAMES,
+    PREDICTED_OUTSIDE,
     TRACKING_MODES,
 )
 from spm_opt.base.version import package_version
@@ -23,8 +24,8 @@ _VERBOSE = "show the library's info lines on stderr (-vv: debug lines too)"
 
 EXIT_STATUSES = {
     0: "success",
-    1: "the plan or run breaks a limit (evaluate), a planner failed (plan, compare), or the "
-    "run ended in a safe stop (execute)",
+    1: "the plan or run breaks a limit (evaluate), the predicted run does (predict), a "
+    "planner failed (plan, compare), or the run ended in a safe stop (execute)",
     2: "bad input: one line 'spm-opt: error: ...' names the field and what is allowed "
     "(a missing optional package too); nothing is written",
     130: "interrupted by Ctrl-C (SIGINT): one line, and nothing is written (unless the "
@@ -111,6 +112,32 @@ def _plant_robot(command: argparse.ArgumentParser, text: str) -> None:
 
 def _trace(command: argparse.ArgumentParser, text: str) -> None:
     command.add_argument("--trace", type=Path, metavar="FILE", help=text)
+
+
+def _json(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--json", action="store_true", help="print the report as JSON (default: markdown)"
+    )
+
+
+def _tracking(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--tracking",
+        choices=TRACKING_MODES,
+        default="lead",
+        help="lead: each goal leads the plan by the position loop's lag (the robot file's "
+        "loop parameters); none: the goal is the plan (default lead)",
+    )
+
+
+def _feed(command: argparse.ArgumentParser) -> None:
+    command.add_argument(
+        "--feed",
+        type=float,
+        default=1.0,
+        metavar="F",
+        help="start at this fraction of the planned pace, 0.1 to 4 (default 1)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -209,6 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
     _out(review, "directory for review.html and review.png (made if missing)")
 
     _execute_parser(commands)
+    _predict_parser(commands)
     _emulate_parser(commands)
 
     sweep = _command(
@@ -303,9 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument(
         "trajectory", type=Path, help="trajectory CSV file, or execution log CSV (spm-opt execute)"
     )
-    evaluate.add_argument(
-        "--json", action="store_true", help="print the report as JSON (default: markdown)"
-    )
+    _json(evaluate)
     _trace(
         evaluate,
         "the plant's true state over the logged run (.npz, from spm-opt execute --backend "
@@ -383,13 +409,7 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         "run a plan made for another problem (or with no sidecar) under --problem's limits "
         "(default: refused)",
     )
-    execute.add_argument(
-        "--tracking",
-        choices=TRACKING_MODES,
-        default="lead",
-        help="lead: each goal leads the plan by the position loop's lag (the robot file's "
-        "loop parameters); none: the goal is the plan (default lead)",
-    )
+    _tracking(execute)
     execute.add_argument(
         "--current-reads",
         type=int,
@@ -415,12 +435,15 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         metavar="A,B",
         help="sim: where the simulated robot rests at the start, deg (default: the plan's start)",
     )
+    _feed(execute)
     execute.add_argument(
-        "--feed",
-        type=float,
-        default=1.0,
-        metavar="F",
-        help="start at this fraction of the planned pace, 0.1 to 4 (default 1)",
+        "--predicted-outside",
+        choices=PREDICTED_OUTSIDE,
+        default="refuse",
+        help="with a contour tolerance, the plan first runs through the closed-loop model "
+        "of the problem's robot (spm-opt predict): refuse: a predicted cut outside the tube, "
+        "or a predicted run that does not complete, refuses the run; warn: says so and runs "
+        "(default refuse)",
     )
     execute.add_argument(
         "--max-hold",
@@ -434,6 +457,42 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         action="store_true",
         help="steer from the terminal: space hold/resume, + and - feed 10%%, q stop "
         "(sim: runs on the wall clock; default: no keys)",
+    )
+
+
+def _predict_parser(commands: argparse._SubParsersAction) -> None:
+    predict = _command(
+        commands,
+        "predict",
+        "predict the cut a trajectory CSV makes on the robot, before it moves",
+        "Runs the plan through the closed-loop model of --robot (its dynamics, friction, "
+        "actuator loops and limits) as spm-opt execute would run it, and judges the model's "
+        "true cut as a run's; prints the report (markdown, or JSON with --json); exits 1 if "
+        "the predicted run breaks a limit, leaves the tube or does not complete.",
+    )
+    _plan_file(predict)
+    _problem_option(predict, "problem TOML whose robot and limits apply", paper=False)
+    predict.add_argument(
+        "--robot",
+        type=Path,
+        metavar="FILE",
+        help="robot TOML the model is, e.g. spm-opt identify's (default: the problem's robot)",
+    )
+    _rate(predict, 100.0, "the control loop's rate, Hz, as for execute (default 100)")
+    _tracking(predict)
+    _feed(predict)
+    predict.add_argument(
+        "--highest-feed",
+        action="store_true",
+        help="when the predicted cut leaves the tube, find the highest feed that keeps it "
+        "inside, within 0.05 by bisection (each feed tried is a prediction; the lines go to "
+        "stderr; default: not searched)",
+    )
+    _json(predict)
+    _other_problem(
+        predict,
+        "predict a plan made for another problem (or with no sidecar) under --problem's "
+        "limits (default: refused)",
     )
 
 

@@ -1,0 +1,205 @@
+"""The predicted cut: a plan run through the robot's closed-loop model before anything moves,
+and judged as a run's true cut is.
+
+The model is the simulated robot whose plant is the robot file: its dynamics, friction, gear
+losses, rotor inertia and encoder zeros, under two Dynamixel controllers with the file's
+loops (Kp and ωv, as the control table's whole gains give them:
+:func:`~spm_opt.execution.plant.gains_for_rates`; the Velocity I Gain the table's default),
+their Velocity and Torque Limits, and the sensors' resolution. The executor drives it with
+the run's settings (rate, lead, starting feed) on a virtual clock, from the plan's start,
+and :func:`~spm_opt.verify.executed_cut.evaluate_log` judges the plant's true state against
+the whole contour tolerance, as it judges a run's trace. A robot file identified from the
+robot's own logs (``spm-opt identify``) makes the model that robot.
+
+What the model cannot know, the prediction does not hold: feed changes made during the run,
+a plant that differs from the file, the stick-slip's scatter from run to run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+from spm_opt.execution.feed import FEED_STEP
+from spm_opt.execution.plant import PlantSettings, gains_for_rates
+from spm_opt.judge.limits import RULES, contour_tube
+from spm_opt.model import kinematics
+from spm_opt.model.params import MM, Robot
+from spm_opt.problem.problem import Problem
+from spm_opt.problem.trajectory import Trajectory
+from spm_opt.verify.executed_cut import ExecutionReport, evaluate_log
+
+_EXECUTION_LOG = logging.getLogger("spm_opt.execution")
+
+
+@dataclasses.dataclass(frozen=True)
+class PredictedCut:
+    """The judgement of a plan's predicted run.
+
+    Attributes
+    ----------
+    report : ExecutionReport
+        The judge's report of the model's true state over the run (``angles`` "true").
+    robot : str
+        The name of the robot file the model is.
+    tube_mm : float or None, mm
+        The contour tolerance the cut is judged against (None: the problem sets none).
+    farthest_at : str
+        Where along the contour the cut is farthest from it.
+    """
+
+    report: ExecutionReport
+    robot: str
+    tube_mm: float | None
+    farthest_at: str
+
+    @property
+    def deviation_mm(self) -> float:
+        """The predicted cut's largest distance from the contour, mm."""
+        return self.report.max_contour_deviation_mm
+
+    @property
+    def inside(self) -> bool:
+        """Whether the predicted cut stays in the tube (with the judge's tolerance), and the
+        predicted run completes."""
+        if not self.report.completed:
+            return False
+        if self.tube_mm is None:
+            return True
+        return self.deviation_mm <= RULES["contour deviation"].allowed(self.tube_mm)
+
+    def summary(self) -> str:
+        """One line: the predicted distance, where, against the tube."""
+        if not self.report.completed:
+            return f"predicted run on {self.robot} does not complete: {self.report.outcome}"
+        where = f" ({self.farthest_at})"
+        if self.tube_mm is None:
+            return (
+                f"predicted cut on {self.robot}: {self.deviation_mm:.3f} mm from the contour{where}"
+            )
+        side = "inside" if self.inside else "outside"
+        return (
+            f"predicted cut on {self.robot}: {self.deviation_mm:.3f} mm from the contour at "
+            f"its farthest{where}, {side} the {self.tube_mm:g} mm tube"
+        )
+
+
+def closed_loop_settings(robot: Robot) -> PlantSettings:
+    """The simulated plant's settings whose loops are ``robot``'s file's (Kp, ωv)."""
+    base = PlantSettings()
+    actuator = robot.actuator
+    position, velocity = gains_for_rates(
+        robot, base, actuator.position_loop_gain_per_s, actuator.velocity_loop_bandwidth_per_s
+    )
+    return dataclasses.replace(base, position_p_gain=position, velocity_p_gain=velocity)
+
+
+def predict_cut(
+    problem: Problem,
+    trajectory: Trajectory,
+    robot: Robot | None = None,
+    settings: ExecutionSettings | None = None,
+) -> PredictedCut:
+    """Run ``trajectory`` through the closed-loop model of ``robot`` (default: the
+    problem's) with the executor's ``settings`` and judge its true cut (see the module's
+    docstring)."""
+    robot = robot or problem.robot
+    settings = dataclasses.replace(settings or ExecutionSettings(), approach=False)
+    backend = SimulatedRobot(
+        problem.robot,
+        start_rad=trajectory.position(trajectory.start_time),
+        settings=closed_loop_settings(robot),
+        plant_robot=robot,
+    )
+    with tempfile.TemporaryDirectory(prefix="spm_opt_predict_") as folder:
+        log, trace = Path(folder) / "predicted.csv", Path(folder) / "predicted.npz"
+        with _quiet(_EXECUTION_LOG):
+            Executor(problem, backend, settings).run(trajectory, log)
+        backend.trace.save(trace)
+        report = evaluate_log(problem, log, trace, other_problem=settings.other_problem).true
+    assert report is not None  # a trace was given
+    tube = contour_tube(problem, executed=True)
+    return PredictedCut(
+        report=report,
+        robot=robot.name,
+        tube_mm=None if tube is None else tube / MM,
+        farthest_at=_farthest_at(problem, backend.trace.arrays()["position_rad"]),
+    )
+
+
+FEED_RESOLUTION = 0.05
+"""How finely :func:`highest_feed_inside` finds the feed, a fraction of the planned pace."""
+
+
+def highest_feed_inside(
+    problem: Problem,
+    trajectory: Trajectory,
+    robot: Robot | None = None,
+    settings: ExecutionSettings | None = None,
+    progress: Callable[[float, PredictedCut], None] | None = None,
+) -> tuple[float, PredictedCut] | None:
+    """The highest feed, from :data:`~spm_opt.execution.feed.FEED_STEP` to ``settings``'
+    starting feed and within :data:`FEED_RESOLUTION`, at which the predicted cut stays in
+    the tube, with its prediction, by bisection (None if the lowest feed leaves it too);
+    ``progress`` is told each feed tried and its prediction. Bisection takes the cut's
+    distance to grow with the feed, which a plant's stick-slip at low speeds can break:
+    the feed found is predicted inside, higher ones tried were not."""
+    settings = settings or ExecutionSettings()
+
+    def tried(feed: float) -> PredictedCut:
+        predicted = predict_cut(
+            problem, trajectory, robot, dataclasses.replace(settings, feed=feed)
+        )
+        if progress is not None:
+            progress(feed, predicted)
+        return predicted
+
+    high = settings.feed
+    first = tried(high)
+    if first.inside:
+        return high, first
+    low, best = FEED_STEP, None
+    while high - low > FEED_RESOLUTION:
+        middle = round(0.5 * (low + high) / FEED_RESOLUTION) * FEED_RESOLUTION
+        if not low < middle < high:
+            break
+        predicted = tried(middle)
+        if predicted.inside:
+            low, best = middle, predicted
+        else:
+            high = middle
+    if best is None:
+        lowest = tried(FEED_STEP)
+        return (FEED_STEP, lowest) if lowest.inside else None
+    return low, best
+
+
+def _farthest_at(problem: Problem, angles: np.ndarray) -> str:
+    """Where along the contour the cut of the joint ``angles`` (N, 2), rad, lies farthest
+    from it: "the cut from A2 to A3, about 12.3 mm along it"."""
+    contour = problem.contour
+    directions = kinematics.motion_directions(angles, np.zeros_like(angles))[0]
+    worst = int(np.argmax(contour.deviation(directions)))
+    near = contour.nearest(directions[worst : worst + 1])
+    arc = int(near.arc[0])
+    along = float(contour.arc_length(near)[0] - contour.landmark_arc_lengths[arc])
+    names = problem.visit_names
+    return f"the cut from {names[arc]} to {names[arc + 1]}, about {along / MM:.1f} mm along it"
+
+
+@contextmanager
+def _quiet(logger: logging.Logger) -> Iterator[None]:
+    """Hold back ``logger``'s records below errors: the model's run is not the robot's."""
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
