@@ -119,7 +119,12 @@ def test_a_clean_runs_verdict_and_figures_are_the_judges(
     _, planned = _cli_json([str(HARDWARE_PROBLEM), str(plan)], capsys)
     out = tmp_path / "review"
     verdict = _page_verdict([str(HARDWARE_PROBLEM), str(plan), "--log", str(log)], out, capsys)
-    assert verdict == {"plan": planned["violations"], "run": [], "run_true": None}
+    assert verdict == {
+        "plan": planned["violations"],
+        "predicted": None,
+        "run": [],
+        "run_true": None,
+    }
     page = (out / "review.html").read_text(encoding="utf-8")
     # the executed cut's figures are the judge's of the log, not the plan's
     for report in (planned, judged):
@@ -206,3 +211,32 @@ def test_a_run_on_another_plant_is_judged_measured_and_true_in_the_executed_tube
     assert planned < executed
     assert f"<td>±{planned:.3f} mm (the plan&#x27;s tube)</td>" in page
     assert f"<td>±{executed:.3f} mm (an executed cut&#x27;s tube)</td>" in page
+
+
+def test_the_predicted_cuts_verdict_is_what_predict_says(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``review --predict ROBOT`` draws the plan's cut predicted on that robot's closed-loop
+    model and lists what ``spm-opt predict --json`` finds (the same model and settings),
+    its violations marked on the predicted cut."""
+    problem = so.load_problem(PAPER_PROBLEM)
+    plan = tmp_path / "toppra.csv"
+    so.plan(problem, "toppra").to_csv(plan)
+    capsys.readouterr()
+    status, _ = run_cli(
+        ["predict", str(plan), "--problem", str(PAPER_PROBLEM), "--robot", str(PLANT), "--json"]
+    )
+    predicted = json.loads(capsys.readouterr().out)
+    assert status == 1 and predicted["violations"]  # the plant's stick-slip at the stops
+    out = tmp_path / "review"
+    verdict = _page_verdict([str(PAPER_PROBLEM), str(plan), "--predict", str(PLANT)], out, capsys)
+    assert verdict["predicted"] == predicted["violations"]
+    assert verdict["run"] is None and verdict["run_true"] is None
+    page = (out / "review.html").read_text(encoding="utf-8")
+    tube = contour_tube(problem, executed=True) / MM
+    said = (
+        f"The predicted cut (on prototype_plant), judged in ±{tube:.3f} mm (an executed cut's tube)"
+    )
+    assert html.escape(said) in page
+    assert f"<td>{predicted['max_contour_deviation_mm']:.3f} mm</td>" in page
+    assert "predicted cut (before the run)" in page

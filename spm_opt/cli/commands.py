@@ -8,6 +8,7 @@ import logging
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from spm_opt.base.errors import InputError
@@ -390,7 +391,12 @@ def _review(args: argparse.Namespace) -> None:
 
     check_output_directory(args.out, "--out")
     problem = load_problem(args.problem)
-    given = review_inputs(problem, args.plan, args.log, args.other_problem, args.trace)
+    predict_on = None
+    if args.predict is not None:
+        from spm_opt.model.params import load_robot
+
+        predict_on = problem.robot if args.predict == "" else load_robot(Path(args.predict))
+    given = review_inputs(problem, args.plan, args.log, args.other_problem, args.trace, predict_on)
     skull = problem.skull if problem.skull is not None else Skull(surface=problem.surface)
     files = {
         args.out / "review.html": review_page(problem, skull, given),

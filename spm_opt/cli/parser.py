@@ -233,6 +233,16 @@ def build_parser() -> argparse.ArgumentParser:
         "draw a plan or a log made for another problem (or recording none) under PROBLEM "
         "(default: refused)",
     )
+    review.add_argument(
+        "--predict",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ROBOT",
+        help="also draw and judge the plan's cut predicted on the closed-loop model of ROBOT "
+        "(a robot TOML; without one, the problem's robot), as spm-opt predict judges it "
+        "(default: not predicted)",
+    )
     _out(review, "directory for review.html and review.png (made if missing)")
 
     _execute_parser(commands)

@@ -13,7 +13,7 @@ import numpy as np
 
 from spm_opt.model.params import MM
 from spm_opt.report.review_scene import Cut, ReviewScene
-from spm_opt.report.review_verdict import PLAN, RUN, RUN_TRUE, Judged, violation_points
+from spm_opt.report.review_verdict import PLAN, PREDICTED, RUN, RUN_TRUE, Judged, violation_points
 from spm_opt.report.robot_geometry import ROBOT_PARTS, robot_pose
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ BACKGROUND = "#ffffff"
 """The page's and the plot's background colour."""
 SKULL_COLOUR = "#d9d9d9"
 """The skull's colour."""
-VIOLATION_COLOURS = {PLAN: "#9400d3", RUN: "#d62728", RUN_TRUE: "#8c564b"}
+VIOLATION_COLOURS = {PLAN: "#9400d3", PREDICTED: "#e377c2", RUN: "#d62728", RUN_TRUE: "#8c564b"}
 """The colour of each judged cut's violation markers."""
 CAMERA_DISTANCE = 1.3
 """The camera's distance from the middle of the robot's box, in the scene's normalised
@@ -118,7 +118,8 @@ def _flap(scene: ReviewScene) -> list[go.Scatter3d]:
 
 
 def _cuts(scene: ReviewScene) -> list[go.Scatter3d]:
-    """The planned cut coloured by its distance from the contour, and the executed cut."""
+    """The planned cut coloured by its distance from the contour, the predicted cut and the
+    executed cut."""
     import plotly.graph_objects as go
 
     planned = scene.planned
@@ -144,31 +145,38 @@ def _cuts(scene: ReviewScene) -> list[go.Scatter3d]:
             name="planned cut",
         )
     ]
+    if scene.predicted is not None:
+        predicted = ("predicted cut (before the run)", "predicted", "#ff7f0e", "dash")
+        cuts.append(_run_cut(scene.predicted, *predicted))
     if scene.executed is not None:
-        cuts.append(_executed(scene.executed))
+        executed = ("executed cut (measured)", "executed", "#17becf", "solid")
+        cuts.append(_run_cut(scene.executed, *executed))
     return cuts
 
 
-def _executed(cut: Cut) -> go.Scatter3d:
+def _run_cut(cut: Cut, name: str, hover: str, colour: str, dash: str) -> go.Scatter3d:
+    """A run's cut (executed, or predicted) as a line of one ``colour`` and ``dash``,
+    ``name`` in the legend, ``hover`` before each point's time."""
     import plotly.graph_objects as go
 
     return go.Scatter3d(
         **_xyz(cut.points),
         mode="lines",
-        line={"color": "#17becf", "width": 4},
+        line={"color": colour, "width": 4, "dash": dash},
         customdata=np.column_stack([cut.t, cut.deviation]),
-        hovertemplate="executed, t = %{customdata[0]:.2f} s: "
+        hovertemplate=f"{hover}, t = %{{customdata[0]:.2f}} s: "
         "%{customdata[1]:.3f} mm off the contour<extra></extra>",
-        name="executed cut (measured)",
+        name=name,
     )
 
 
 def _violation_markers(cut: Judged, scene: ReviewScene) -> go.Scatter3d:
     """A marker at each of a judged cut's violations: on the planned cut at its plan time,
-    on the executed cut (the measured angles, for the true cut too) at its log time."""
+    on the executed cut (the measured angles, for the true cut too) at its log time, on the
+    predicted cut at its predicted run's time."""
     import plotly.graph_objects as go
 
-    drawn = scene.executed if cut.executed and scene.executed is not None else scene.planned
+    drawn = scene.drawn(cut.key)
     violations = cut.report.violations
     points = violation_points(violations, drawn.t, drawn.points)
     return go.Scatter3d(

@@ -1,6 +1,7 @@
 """What the review draws, read and checked as ``spm-opt evaluate`` and ``spm-opt execute``
-check it: the plan, and an execution log with the judge's reports of it; a plan or a log
-made for another problem only when asked for, with a warning for the page."""
+check it: the plan, an execution log with the judge's reports of it, and the plan's cut
+predicted on a robot file's closed-loop model; a plan or a log made for another problem
+only when asked for, with a warning for the page."""
 
 from __future__ import annotations
 
@@ -15,9 +16,11 @@ from spm_opt.problem.provenance import PLAN_HINT, check_made_for, check_run_of, 
 if TYPE_CHECKING:
     import pandas as pd
 
+    from spm_opt.model.params import Robot
     from spm_opt.problem.problem import Problem
     from spm_opt.problem.trajectory import Trajectory
     from spm_opt.verify.executed_cut import LogReports
+    from spm_opt.verify.predicted_cut import PredictedCut
 
 _LOG = logging.getLogger(__name__)
 
@@ -37,12 +40,16 @@ class ReviewInputs:
     run : LogReports or None
         The judge's reports of that log (:func:`~spm_opt.verify.executed_cut.evaluate_log`):
         given with ``log``.
+    predicted : PredictedCut or None
+        The plan's run predicted on a robot file's closed-loop model, and its judgement
+        (:func:`~spm_opt.verify.predicted_cut.predict_cut`).
     """
 
     trajectory: Trajectory
     log: pd.DataFrame | None = None
     warnings: tuple[str, ...] = ()
     run: LogReports | None = None
+    predicted: PredictedCut | None = None
 
 
 def review_inputs(
@@ -51,6 +58,7 @@ def review_inputs(
     log: Path | None = None,
     other_problem: bool = False,
     trace: Path | None = None,
+    predict_on: Robot | None = None,
 ) -> ReviewInputs:
     """Read the plan, and the execution log when given, checked as ``spm-opt evaluate``
     and ``spm-opt execute`` check them: each must record ``problem`` as the one it was made
@@ -72,6 +80,9 @@ def review_inputs(
     trace : path, optional
         The plant's true state over the run (``spm-opt execute --trace``): its true cut is
         judged too. Only with ``log``.
+    predict_on : Robot, optional
+        Predict the plan's run on this robot's closed-loop model (the executor's default
+        settings) and judge its cut.
     """
     from spm_opt.problem.trajectory import Trajectory
     from spm_opt.verify.executed_cut import evaluate_log, read_log_checked
@@ -103,6 +114,13 @@ def review_inputs(
         warnings += [f"log {log}: {why}"] if why else []
         check_run_of(trajectory, str(plan), header, str(log))
         run = evaluate_log(problem, log, trace, other_problem=other_problem)
+    predicted = None
+    if predict_on is not None:
+        from spm_opt.execution import ExecutionSettings
+        from spm_opt.verify.predicted_cut import predict_cut
+
+        settings = ExecutionSettings(other_problem=other_problem)
+        predicted = predict_cut(problem, trajectory, predict_on, settings)
     for warning in warnings:
         _LOG.warning("%s; reviewed under %s's limits as asked", warning, problem.name)
-    return ReviewInputs(trajectory, table, tuple(warnings), run)
+    return ReviewInputs(trajectory, table, tuple(warnings), run, predicted)

@@ -69,8 +69,8 @@ def review_page(
         raise InputError("given: a log and the judge's reports of it go together")
     trajectory = given.trajectory
     report = evaluate(problem, trajectory) if report is None else report
-    cuts = judged_cuts(problem, report, given.run)
-    scene = review_scene(problem, skull, trajectory, given.log)
+    cuts = judged_cuts(problem, report, given.run, given.predicted)
+    scene = review_scene(problem, skull, trajectory, given.log, given.predicted)
     figure = review_figure(problem, scene, trajectory, cuts)
     plot = figure.to_html(
         include_plotlyjs=True,

@@ -18,6 +18,7 @@ from spm_opt.report.planner_style import labelled_handles, new_figure
 from spm_opt.report.review_scene import ReviewScene, decimate, review_scene
 from spm_opt.report.review_verdict import (
     PLAN,
+    PREDICTED,
     RUN,
     RUN_TRUE,
     Judged,
@@ -51,7 +52,14 @@ PLANNED_WIDTH = 4.0
 colours showing on either side."""
 EXECUTED = {"color": "black", "linewidth": 0.8, "linestyle": (0, (4, 2))}
 """How the executed cut is drawn over the planned one."""
-VIOLATION_COLOURS = {PLAN: "darkviolet", RUN: "tab:red", RUN_TRUE: "tab:brown"}
+PREDICTED_LINE = {"color": "tab:orange", "linewidth": 1.0, "linestyle": (0, (1, 1.5))}
+"""How the predicted cut is drawn over the planned one."""
+VIOLATION_COLOURS = {
+    PLAN: "darkviolet",
+    PREDICTED: "tab:pink",
+    RUN: "tab:red",
+    RUN_TRUE: "tab:brown",
+}
 """The colour of each judged cut's violation markers and lines."""
 ROBOT_ZOOM = 0.85
 """The robot's box drawn this much smaller than its panel, so that its z label stays in it."""
@@ -80,8 +88,8 @@ def review_png(
 
     trajectory = given.trajectory
     report = evaluate(problem, trajectory) if report is None else report
-    cuts = judged_cuts(problem, report, given.run)
-    scene = review_scene(problem, skull, trajectory, given.log)
+    cuts = judged_cuts(problem, report, given.run, given.predicted)
+    scene = review_scene(problem, skull, trajectory, given.log, given.predicted)
     return to_png(review_png_figure(problem, scene, trajectory, cuts))
 
 
@@ -130,9 +138,9 @@ def _mark_violations(
     axis: Axes3D, scene: ReviewScene, listed: list[tuple[Judged, Violation]]
 ) -> None:
     """A numbered cross at the cut's point at each listed violation's time: on the planned
-    cut for the plan's, on the executed cut for a run's."""
+    cut for the plan's, on the executed cut for a run's, on the predicted cut for its."""
     for number, (cut, violation) in enumerate(listed, start=1):
-        drawn = scene.executed if cut.executed and scene.executed is not None else scene.planned
+        drawn = scene.drawn(cut.key)
         point = violation_points([violation], drawn.t, drawn.points)[0]
         axis.scatter(
             *point[:, None],
@@ -235,8 +243,8 @@ def _draw_robot(
 
 def _draw_flap(axis: Axes3D, scene: ReviewScene, skull: np.ndarray) -> object:
     """The flap close up: the skull, the contour, the landmarks, the planned cut coloured
-    by its distance from the contour, the executed cut; returns the planned cut's lines
-    (for the colour bar)."""
+    by its distance from the contour, the predicted and the executed cut; returns the
+    planned cut's lines (for the colour bar)."""
     planned = scene.planned
     cut = np.vstack([scene.contour, planned.points])
     middle = 0.5 * (cut.min(axis=0) + cut.max(axis=0))
@@ -254,6 +262,8 @@ def _draw_flap(axis: Axes3D, scene: ReviewScene, skull: np.ndarray) -> object:
     lines.set_array(0.5 * (planned.deviation[:-1] + planned.deviation[1:]))
     lines.set_clim(0.0, max(float(np.max(planned.deviation)), 1e-3))
     axis.add_collection3d(lines)
+    if scene.predicted is not None:
+        axis.plot(*scene.predicted.points.T, **PREDICTED_LINE, label="predicted cut")
     if scene.executed is not None:
         axis.plot(*scene.executed.points.T, **EXECUTED, label="executed cut (measured)")
     axis.scatter(*scene.landmarks.T, color="black", marker="D", s=18, label="landmarks")
@@ -266,8 +276,13 @@ def _draw_flap(axis: Axes3D, scene: ReviewScene, skull: np.ndarray) -> object:
     )
     axis.set_box_aspect((1.0, 1.0, 1.0))
     axis.computed_zorder = False
-    executed = "" if scene.executed is None else " and the executed cut"
-    _finish(axis, scene, f"the flap: the planned cut{executed}")
+    others = [
+        name
+        for name, cut in (("predicted", scene.predicted), ("executed", scene.executed))
+        if cut is not None
+    ]
+    drawn = f" and the {' and the '.join(others)} cut" if others else ""
+    _finish(axis, scene, f"the flap: the planned cut{drawn}")
     return lines
 
 

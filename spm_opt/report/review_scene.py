@@ -1,6 +1,7 @@
 """What the review page and its PNG draw, in mm in the robot's frame: the skull's patch
 around the flap, the landmarks, the planned contour, the planned cut coloured by its
-distance from the contour, the executed cut from a log, and the times the robot is shown at.
+distance from the contour, the executed cut from a log, the predicted cut of the plan's run
+on a robot file's closed-loop model, and the times the robot is shown at.
 
 The cut in a direction p (the platform's unit direction, Eq. 5 over r_u) is where the tool
 meets the skull, ρ(p) p with ρ the skull's radius in that direction. The skull is drawn
@@ -17,6 +18,7 @@ import numpy as np
 from spm_opt.base.errors import InputError
 from spm_opt.model import kinematics
 from spm_opt.model.params import DEG, MM
+from spm_opt.report.review_verdict import PREDICTED, RUN, RUN_TRUE
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -24,6 +26,7 @@ if TYPE_CHECKING:
     from spm_opt.problem.problem import Problem
     from spm_opt.problem.trajectory import Trajectory
     from spm_opt.skull.surface import Skull
+    from spm_opt.verify.predicted_cut import PredictedCut
 
 SKULL_REACH = 45.0 * DEG
 """The skull is drawn this far (rad) from the flap's mean landmark direction, or farther
@@ -85,6 +88,8 @@ class ReviewScene:
     planned : Cut
     executed : Cut or None
         The measured joint angles of a log, from its plan phase's start on.
+    predicted : Cut or None
+        The closed-loop model's true joint angles over the plan's predicted run.
     """
 
     flap_direction: np.ndarray
@@ -95,13 +100,30 @@ class ReviewScene:
     contour: np.ndarray
     planned: Cut
     executed: Cut | None
+    predicted: Cut | None = None
+
+    def drawn(self, key: str) -> Cut:
+        """The cut a judged cut's violations are marked on (its
+        :class:`~spm_opt.report.review_verdict.Judged` key): the predicted cut for the
+        prediction's, the executed one (the measured angles) for a run's, if drawn, else
+        the planned cut."""
+        if key == PREDICTED and self.predicted is not None:
+            return self.predicted
+        if key in (RUN, RUN_TRUE) and self.executed is not None:
+            return self.executed
+        return self.planned
 
 
 def review_scene(
-    problem: Problem, skull: Skull, trajectory: Trajectory, log: pd.DataFrame | None = None
+    problem: Problem,
+    skull: Skull,
+    trajectory: Trajectory,
+    log: pd.DataFrame | None = None,
+    predicted: PredictedCut | None = None,
 ) -> ReviewScene:
-    """The scene of a plan, and of its execution when ``log`` (an execution log's table,
-    :func:`spm_opt.execution.log.read_execution_log`) is given."""
+    """The scene of a plan, of its execution when ``log`` (an execution log's table,
+    :func:`spm_opt.execution.log.read_execution_log`) is given, and of its predicted run
+    when ``predicted`` is."""
     directions = problem.landmarks / np.linalg.norm(problem.landmarks, axis=1, keepdims=True)
     centre = directions.mean(axis=0)
     centre /= np.linalg.norm(centre)
@@ -125,6 +147,7 @@ def review_scene(
         contour=contour.point_at(np.linspace(0.0, contour.length, CONTOUR_SAMPLES)) / MM,
         planned=_cut(problem, skull, t, trajectory.position(t)),
         executed=executed,
+        predicted=None if predicted is None else _cut(problem, skull, *_thinned(predicted)),
     )
 
 
@@ -147,6 +170,13 @@ def executed_angles(log: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     step = int(np.ceil(len(values) / MAX_CUT_SAMPLES))
     values = values[::step]
     return values[:, 0], values[:, 1:]
+
+
+def _thinned(predicted: PredictedCut) -> tuple[np.ndarray, np.ndarray]:
+    """A predicted run's times (N,), s, and joint angles (N, 2), rad, at most
+    :data:`MAX_CUT_SAMPLES` of them, evenly spaced."""
+    step = int(np.ceil(len(predicted.time_s) / MAX_CUT_SAMPLES))
+    return predicted.time_s[::step], predicted.angles_rad[::step]
 
 
 def _cut(problem: Problem, skull: Skull, t: np.ndarray, q: np.ndarray) -> Cut:

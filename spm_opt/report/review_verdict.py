@@ -20,10 +20,12 @@ if TYPE_CHECKING:
     from spm_opt.judge.report import Report, Violation
     from spm_opt.problem.problem import Problem
     from spm_opt.verify.executed_cut import LogReports
+    from spm_opt.verify.predicted_cut import PredictedCut
 
 PLAN = "plan"
 RUN = "run"
 RUN_TRUE = "run_true"
+PREDICTED = "predicted"
 """The keys of the judged cuts in the page's machine-readable verdict."""
 
 
@@ -34,8 +36,9 @@ class Judged:
     Attributes
     ----------
     key : str
-        :data:`PLAN`, :data:`RUN` (the log's measured angles) or :data:`RUN_TRUE` (the
-        plant's true angles, from a trace).
+        :data:`PLAN`, :data:`RUN` (the log's measured angles), :data:`RUN_TRUE` (the
+        plant's true angles, from a trace) or :data:`PREDICTED` (the closed-loop model's
+        true angles, before the robot moves: :mod:`spm_opt.verify.predicted_cut`).
     label : str
         The cut's name for people: "planned cut", "executed cut (measured)", ...
     report : Report
@@ -51,7 +54,8 @@ class Judged:
 
     @property
     def executed(self) -> bool:
-        """Whether this is an executed cut (judged at the log's times), not the plan."""
+        """Whether this is an executed cut (judged at a log's times, a predicted run's
+        too), not the plan."""
         return self.key != PLAN
 
     @property
@@ -60,11 +64,20 @@ class Judged:
         return not self.report.accepted
 
 
-def judged_cuts(problem: Problem, plan: Report, run: LogReports | None = None) -> list[Judged]:
-    """The plan's judgement and, with ``run`` (:func:`~spm_opt.verify.executed_cut.
-    evaluate_log`'s reports of its log), the run's: measured, then true when traced."""
+def judged_cuts(
+    problem: Problem,
+    plan: Report,
+    run: LogReports | None = None,
+    predicted: PredictedCut | None = None,
+) -> list[Judged]:
+    """The plan's judgement; with ``predicted``, its predicted run's; and with ``run``
+    (:func:`~spm_opt.verify.executed_cut.evaluate_log`'s reports of its log), the run's:
+    measured, then true when traced."""
     planned_tube, executed_tube = contour_tube(problem), contour_tube(problem, executed=True)
     cuts = [Judged(PLAN, "planned cut", plan, _mm(planned_tube))]
+    if predicted is not None:
+        label = f"predicted cut (on {predicted.robot})"
+        cuts.append(Judged(PREDICTED, label, predicted.report, _mm(executed_tube)))
     if run is not None:
         cuts.append(Judged(RUN, "executed cut (measured)", run.measured, _mm(executed_tube)))
     if run is not None and run.true is not None:
@@ -75,7 +88,7 @@ def judged_cuts(problem: Problem, plan: Report, run: LogReports | None = None) -
 def verdict_json(cuts: list[Judged]) -> str:
     """The verdict as JSON: per cut's key, its violations as ``spm-opt evaluate --json``
     gives them (None for a cut not judged), safe inside an HTML ``<script>``."""
-    data: dict[str, list[dict] | None] = {PLAN: None, RUN: None, RUN_TRUE: None}
+    data: dict[str, list[dict] | None] = {PLAN: None, PREDICTED: None, RUN: None, RUN_TRUE: None}
     data.update({cut.key: [asdict(v) for v in cut.report.violations] for cut in cuts})
     return json.dumps(data, indent=1).replace("</", "<\\/")
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
 from spm_opt.execution.feed import FEED_STEP
+from spm_opt.execution.log import read_execution_log
 from spm_opt.execution.plant import PlantSettings, gains_for_rates
 from spm_opt.judge.limits import RULES, contour_tube
 from spm_opt.model import kinematics
@@ -53,12 +54,18 @@ class PredictedCut:
         The contour tolerance the cut is judged against (None: the problem sets none).
     farthest_at : str
         Where along the contour the cut is farthest from it.
+    time_s : ndarray (N,), s
+        The predicted run's times, on its log's clock (the plan starts at its first).
+    angles_rad : ndarray (N, 2), rad
+        The model's true joint angles at those times.
     """
 
     report: ExecutionReport
     robot: str
     tube_mm: float | None
     farthest_at: str
+    time_s: np.ndarray
+    angles_rad: np.ndarray
 
     @property
     def deviation_mm(self) -> float:
@@ -124,13 +131,17 @@ def predict_cut(
             Executor(problem, backend, settings).run(trajectory, log)
         backend.trace.save(trace)
         report = evaluate_log(problem, log, trace, other_problem=settings.other_problem).true
+        origin = read_execution_log(log)[1]["clock_origin_s"]
     assert report is not None  # a trace was given
     tube = contour_tube(problem, executed=True)
+    state = backend.trace.arrays(origin)
     return PredictedCut(
         report=report,
         robot=robot.name,
         tube_mm=None if tube is None else tube / MM,
-        farthest_at=_farthest_at(problem, backend.trace.arrays()["position_rad"]),
+        farthest_at=_farthest_at(problem, state["position_rad"]),
+        time_s=state["time_s"],
+        angles_rad=state["position_rad"],
     )
 
 
