@@ -47,7 +47,7 @@ def check_cut(
         if len(bad):
             k = int(bad[0])
             raise InputError(
-                f"{_stretch(visit_names, arc[k], angle[k] * radius)}: the tool's axis meets the "
+                f"{stretch(visit_names, arc[k], angle[k] * radius)}: the tool's axis meets the "
                 f"outer surface {int(counts[k])} times"
                 + ("" if side == 0.0 else " at the tube's edge")
                 + "; it must meet it once (a hole in the mesh, or the isocenter misplaced?)"
@@ -60,12 +60,12 @@ def check_cut(
         k = int(thin[np.argmin(np.nan_to_num(thickness[thin], nan=-np.inf))])
         value = "no inner surface" if np.isnan(thickness[k]) else f"{thickness[k] / MM:.2f} mm"
         raise InputError(
-            f"{_stretch(visit_names, arc[k], angle[k] * radius)}: bone {value} thick along "
+            f"{stretch(visit_names, arc[k], angle[k] * radius)}: bone {value} thick along "
             f"the tool's axis, below min_bone_thickness_mm = {min_thickness / MM:g}"
         )
 
 
-def _stretch(visit_names: list[str], arc: int, along: float) -> str:
+def stretch(visit_names: list[str], arc: int, along: float) -> str:
     """'the cut from A2 to A3, about 12.3 mm along it' (``along`` in m)."""
     return (
         f"the cut from {visit_names[arc]} to {visit_names[arc + 1]}, about "

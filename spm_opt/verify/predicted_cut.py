@@ -26,11 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
+from spm_opt.cut.cut_checks import stretch
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
 from spm_opt.execution.feed import FEED_STEP
 from spm_opt.execution.log import read_execution_log
 from spm_opt.execution.plant import PlantSettings, gains_for_rates
-from spm_opt.judge.limits import RULES, contour_tube
+from spm_opt.judge.limits import contour_tube
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM, Robot
 from spm_opt.problem.problem import Problem
@@ -74,13 +75,9 @@ class PredictedCut:
 
     @property
     def inside(self) -> bool:
-        """Whether the predicted cut stays in the tube (with the judge's tolerance), and the
-        predicted run completes."""
-        if not self.report.completed:
-            return False
-        if self.tube_mm is None:
-            return True
-        return self.deviation_mm <= RULES["contour deviation"].allowed(self.tube_mm)
+        """Whether the predicted run completes and the judge finds its cut in the tube."""
+        broken = {violation.rule for violation in self.report.violations}
+        return self.report.completed and "contour deviation" not in broken
 
     def summary(self) -> str:
         """One line: the predicted distance, where, against the tube."""
@@ -201,8 +198,7 @@ def _farthest_at(problem: Problem, angles: np.ndarray) -> str:
     near = contour.nearest(directions[worst : worst + 1])
     arc = int(near.arc[0])
     along = float(contour.arc_length(near)[0] - contour.landmark_arc_lengths[arc])
-    names = problem.visit_names
-    return f"the cut from {names[arc]} to {names[arc + 1]}, about {along / MM:.1f} mm along it"
+    return stretch(problem.visit_names, arc, along)
 
 
 @contextmanager
