@@ -7,6 +7,7 @@ for brain surgery.
     report = so.evaluate(problem, trajectory)
     table = so.compare(problem)  # every planner, one row each (a pandas DataFrame)
     predicted = so.predict_cut(problem, trajectory)  # the closed-loop model's true cut
+    compensated = so.compensate(problem, trajectory).plan  # corrected for what repeats
     result = so.execute(trajectory, backend=so.SimulatedRobot(problem.robot,
                         start_rad=trajectory.position(0.0)), problem=problem, log="run.csv")
 
@@ -40,6 +41,7 @@ if TYPE_CHECKING:
     from spm_opt.problem.trajectory import Trajectory
     from spm_opt.studies.comparison import compare
     from spm_opt.studies.sweep.results import load_sweep
+    from spm_opt.verify.compensation import compensate
     from spm_opt.verify.judgement import evaluate
     from spm_opt.verify.predicted_cut import predict_cut
 
@@ -64,6 +66,7 @@ _HOMES = {
     "load_problem": "spm_opt.problem.problem",
     "load_sweep": "spm_opt.studies.sweep.results",
     "predict_cut": "spm_opt.verify.predicted_cut",
+    "compensate": "spm_opt.verify.compensation",
     "Trajectory": "spm_opt.problem.trajectory",
 }
 """The module each lazily imported name comes from."""
@@ -106,6 +109,7 @@ __all__ = [
     "UnreachableError",
     "Violation",
     "compare",
+    "compensate",
     "evaluate",
     "execute",
     "inverse_dynamics",

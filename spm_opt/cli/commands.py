@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -131,20 +132,12 @@ def _check_predicted_cut(
 
 
 def _predict(args: argparse.Namespace) -> None:
-    from spm_opt.execution import ExecutionSettings
     from spm_opt.model.params import load_robot
     from spm_opt.problem.problem import load_problem
     from spm_opt.problem.trajectory import Trajectory
     from spm_opt.verify.predicted_cut import predict_cut
 
-    settings = _settings(
-        ExecutionSettings,
-        rate_hz=args.rate,
-        feed=args.feed,
-        max_feed=max(ExecutionSettings.max_feed, args.feed),
-        other_problem=args.other_problem,
-        tracking=args.tracking,
-    )
+    settings = _model_run_settings(args)
     problem = load_problem(args.problem)
     robot = None if args.robot is None else load_robot(args.robot)
     trajectory = Trajectory.from_csv(args.plan)
@@ -159,6 +152,59 @@ def _predict(args: argparse.Namespace) -> None:
     fault = _faults("predicted", predicted.report)
     if fault or not predicted.inside:
         raise GateFailed(fault or predicted.summary())
+
+
+def _compensate(args: argparse.Namespace) -> None:
+    from spm_opt.model.params import load_robot
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.problem.provenance import check_plan_made_for
+    from spm_opt.problem.trajectory import Trajectory
+    from spm_opt.verify.compensation import compensate, compensate_from_run
+
+    if args.out.suffix != ".csv":
+        raise InputError(f"--out {args.out}: expected a file name ending in .csv")
+    if args.iterations < 1:
+        raise InputError(f"--iterations {args.iterations}: expected a whole number of at least 1")
+    if args.dry_run is not None and args.robot is not None:
+        raise InputError("--robot: not with --dry-run (the dry run's robot is the model)")
+    settings = _model_run_settings(args)
+    check_output_file(args.out, "--out")
+    problem = load_problem(args.problem)
+    trajectory = Trajectory.from_csv(args.plan)
+    check_plan_made_for(problem, trajectory, args.other_problem)
+    if args.dry_run is not None:
+        compensation = compensate_from_run(problem, trajectory, args.dry_run)
+    else:
+        robot = None if args.robot is None else load_robot(args.robot)
+        compensation = compensate(problem, trajectory, robot, settings, args.iterations)
+    for k, iteration in enumerate(compensation.iterations):
+        cut = "" if iteration.deviation_mm is None else f"cut {iteration.deviation_mm:.3f} mm, "
+        print(
+            f"{'plan' if k == 0 else f'correction {k}'}: {cut}largest joint error "
+            f"{math.degrees(iteration.largest_error_rad):.3f} deg"
+        )
+    compensation.plan.to_csv(args.out)
+    scale = compensation.plan.metadata["compensation"]["scale"]
+    kept = f"{compensation.kept} correction(s) kept" + (
+        f", scaled by {scale:g} to keep the robot's limits" if scale != 1.0 else ""
+    )
+    predicted = "" if compensation.predicted is None else f"; {compensation.predicted.summary()}"
+    print(f"{args.out}: {kept}{predicted}")
+
+
+def _model_run_settings(args: argparse.Namespace) -> ExecutionSettings:
+    """The executor's settings a run on the closed-loop model takes from ``predict``'s and
+    ``compensate``'s options."""
+    from spm_opt.execution import ExecutionSettings
+
+    return _settings(
+        ExecutionSettings,
+        rate_hz=args.rate,
+        feed=args.feed,
+        max_feed=max(ExecutionSettings.max_feed, args.feed),
+        other_problem=args.other_problem,
+        tracking=args.tracking,
+    )
 
 
 def _report_highest_feed(
@@ -338,9 +384,33 @@ def _plan(args: argparse.Namespace) -> None:
     check_output_file(args.out, "--out")
     get_planner(args.planner)
     problem = load_problem(args.problem)
-    trajectory = plan(problem, args.planner)
+    if args.predicted_reserve is None:
+        trajectory = plan(problem, args.planner)
+    else:
+        trajectory = _plan_within_prediction(problem, args.planner, args.predicted_reserve)
     trajectory.to_csv(args.out, rate_hz=args.rate)
     print(f"{args.out}: {args.planner} plan, {trajectory.duration:.3f} s")
+
+
+def _plan_within_prediction(problem: Problem, planner: str, robot_path: str) -> Trajectory:
+    """``plan --predicted-reserve``: the plan, re-planned once with the reserve its
+    predicted cut asks for if that cut leaves the tube; each prediction on stdout."""
+    from spm_opt.model.params import load_robot
+    from spm_opt.verify.predicted_reserve import plan_within_prediction
+
+    robot = load_robot(robot_path) if robot_path else None
+    kept = plan_within_prediction(problem, planner, robot)
+    print(f"first plan: {kept.first.summary()}")
+    if kept.replanned:
+        print(
+            f"re-planned keeping {kept.reserve_mm:.3f} mm for execution: {kept.predicted.summary()}"
+        )
+    elif not kept.first.inside:
+        print(
+            "not re-planned: the plan's own distance from the contour, not execution, "
+            "takes the tube"
+        )
+    return kept.plan
 
 
 def _evaluate(args: argparse.Namespace) -> None:
@@ -548,6 +618,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], None]] = {
     "review": _review,
     "execute": _execute,
     "predict": _predict,
+    "compensate": _compensate,
     "emulate": _emulate,
     "sweep": _sweep,
     "cache": _cache,

@@ -185,6 +185,17 @@ def build_parser() -> argparse.ArgumentParser:
         "(default 100, breakpoints included); not the control loop's rate: execute "
         "interpolates the CSV at its own --rate",
     )
+    plan.add_argument(
+        "--predicted-reserve",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ROBOT",
+        help="predict the plan's cut on the closed-loop model of ROBOT (a robot TOML; "
+        "without one, the problem's robot), as spm-opt predict does, and when it leaves the "
+        "tube re-plan once keeping for execution what the prediction says it takes, plus "
+        "0.01 mm (default: the problem's execution_reserve_mm)",
+    )
 
     compare = _command(
         commands,
@@ -247,6 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _execute_parser(commands)
     _predict_parser(commands)
+    _compensate_parser(commands)
     _emulate_parser(commands)
 
     sweep = _command(
@@ -470,6 +482,23 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
     )
 
 
+def _model_robot(command: argparse.ArgumentParser) -> None:
+    """``--robot``: the robot file the closed-loop model is."""
+    command.add_argument(
+        "--robot",
+        type=Path,
+        metavar="FILE",
+        help="robot TOML the model is, e.g. spm-opt identify's (default: the problem's robot)",
+    )
+
+
+def _model_run(command: argparse.ArgumentParser) -> None:
+    """The executor's settings for a run on the model: ``--rate``, ``--tracking``, ``--feed``."""
+    _rate(command, 100.0, "the control loop's rate, Hz, as for execute (default 100)")
+    _tracking(command)
+    _feed(command)
+
+
 def _predict_parser(commands: argparse._SubParsersAction) -> None:
     predict = _command(
         commands,
@@ -482,15 +511,8 @@ def _predict_parser(commands: argparse._SubParsersAction) -> None:
     )
     _plan_file(predict)
     _problem_option(predict, "problem TOML whose robot and limits apply", paper=False)
-    predict.add_argument(
-        "--robot",
-        type=Path,
-        metavar="FILE",
-        help="robot TOML the model is, e.g. spm-opt identify's (default: the problem's robot)",
-    )
-    _rate(predict, 100.0, "the control loop's rate, Hz, as for execute (default 100)")
-    _tracking(predict)
-    _feed(predict)
+    _model_robot(predict)
+    _model_run(predict)
     predict.add_argument(
         "--highest-feed",
         action="store_true",
@@ -502,6 +524,46 @@ def _predict_parser(commands: argparse._SubParsersAction) -> None:
     _other_problem(
         predict,
         "predict a plan made for another problem (or with no sidecar) under --problem's "
+        "limits (default: refused)",
+    )
+
+
+def _compensate_parser(commands: argparse._SubParsersAction) -> None:
+    compensate = _command(
+        commands,
+        "compensate",
+        "correct a plan's goals for what its runs repeat, learned on the robot's model or a "
+        "dry run",
+        "Iterative learning control: the plan's stream is run (on the closed-loop model of "
+        "--robot, as spm-opt predict runs it, or read from --dry-run's log), its joints' "
+        "error against the plan filtered and taken off the next stream; the stream whose "
+        "predicted cut is nearest the contour is written to --out as a plan, its sidecar "
+        "saying what it was learned from. Run the written plan with spm-opt execute, "
+        "predict or review like any other.",
+    )
+    _plan_file(compensate)
+    _problem_option(compensate, "problem TOML whose robot and limits apply", paper=False)
+    _out(compensate, "the compensated plan's CSV (its JSON sidecar beside it)")
+    _model_robot(compensate)
+    compensate.add_argument(
+        "--iterations",
+        type=int,
+        default=3,
+        metavar="N",
+        help="corrections learned on the model, at least 1 (default 3; the first is the "
+        "load's deflection fed forward)",
+    )
+    compensate.add_argument(
+        "--dry-run",
+        type=Path,
+        metavar="LOG",
+        help="learn one correction from this execution log of PLAN, or of a plan compensated "
+        "from it, run with the tool retracted (default: learn on the model)",
+    )
+    _model_run(compensate)
+    _other_problem(
+        compensate,
+        "compensate a plan made for another problem (or with no sidecar) under --problem's "
         "limits (default: refused)",
     )
 

@@ -176,6 +176,7 @@ class Executor:
         self, trajectory: Trajectory, log_path: Path, header: dict[str, Any]
     ) -> ExecutionResult:
         self.check_plan(trajectory)
+        _warn_if_learned_otherwise(trajectory, self.settings)
         self._requests.ceiling = feed_ceiling(
             self.problem, trajectory, self.settings.max_feed, self._lead
         )
@@ -475,3 +476,23 @@ def execute(
     """Run ``trajectory`` on ``backend`` under ``problem``'s limits, logging to ``log``
     (CSV, with its JSON header beside it). See :class:`Executor`."""
     return Executor(problem, backend, settings).run(trajectory, log)
+
+
+def _warn_if_learned_otherwise(trajectory: Trajectory, settings: ExecutionSettings) -> None:
+    """Warn when a compensated plan (:mod:`spm_opt.verify.compensation`) runs at a starting
+    feed, a rate or a tracking other than those its correction was learned at."""
+    learned = trajectory.metadata.get("compensation")
+    if not isinstance(learned, dict):
+        return
+    now = {"feed": settings.feed, "rate_hz": settings.rate_hz, "tracking": settings.tracking}
+    other = [
+        f"{key} {learned.get(key)} (now {value})"
+        for key, value in now.items()
+        if learned.get(key) != value
+    ]
+    if other:
+        _LOG.warning(
+            "this plan's correction was learned at %s: it repeats what it learned only as "
+            "it was learned",
+            ", ".join(other),
+        )

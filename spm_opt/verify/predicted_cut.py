@@ -37,6 +37,7 @@ from spm_opt.model.params import MM, Robot
 from spm_opt.problem.problem import Problem
 from spm_opt.problem.trajectory import Trajectory
 from spm_opt.verify.executed_cut import ExecutionReport, evaluate_log
+from spm_opt.verify.followed import Followed, followed_in_log
 
 _EXECUTION_LOG = logging.getLogger("spm_opt.execution")
 
@@ -59,6 +60,8 @@ class PredictedCut:
         The predicted run's times, on its log's clock (the plan starts at its first).
     angles_rad : ndarray (N, 2), rad
         The model's true joint angles at those times.
+    followed : Followed
+        The plan-phase cycles: their plan times, references and the model's true angles.
     """
 
     report: ExecutionReport
@@ -67,6 +70,7 @@ class PredictedCut:
     farthest_at: str
     time_s: np.ndarray
     angles_rad: np.ndarray
+    followed: Followed
 
     @property
     def deviation_mm(self) -> float:
@@ -128,10 +132,10 @@ def predict_cut(
             Executor(problem, backend, settings).run(trajectory, log)
         backend.trace.save(trace)
         report = evaluate_log(problem, log, trace, other_problem=settings.other_problem).true
-        origin = read_execution_log(log)[1]["clock_origin_s"]
+        table, header = read_execution_log(log)
     assert report is not None  # a trace was given
     tube = contour_tube(problem, executed=True)
-    state = backend.trace.arrays(origin)
+    state = backend.trace.arrays(header["clock_origin_s"])
     return PredictedCut(
         report=report,
         robot=robot.name,
@@ -139,6 +143,7 @@ def predict_cut(
         farthest_at=_farthest_at(problem, state["position_rad"]),
         time_s=state["time_s"],
         angles_rad=state["position_rad"],
+        followed=followed_in_log(table, state),
     )
 
 
