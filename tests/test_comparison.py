@@ -123,6 +123,18 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
             ["identification_coverage.py", "--seeds", "1", "--plants", "1", "--fit-seconds", "30"],
             marks=[pytest.mark.slow, pytest.mark.xdist_group("real time")],
         ),
+        pytest.param(
+            [
+                "compensated_cut.py",
+                "--plants",
+                "1",
+                "--flaps",
+                "craniotomy_bone_flap",
+                "--planners",
+                "toppra",
+            ],
+            marks=pytest.mark.slow,
+        ),
     ],
     ids=lambda c: " ".join(c),
 )
@@ -137,6 +149,7 @@ def test_every_experiment_script_runs(tmp_path, command):
         "identification_coverage.py",
         "feed_hold.py",
         "executed_cut.py",
+        "compensated_cut.py",
     }
     assert {p.name for p in (ROOT / "experiments").glob("*.py")} == listed
     out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
@@ -151,6 +164,10 @@ def test_every_experiment_script_runs(tmp_path, command):
         study = (tmp_path / "identification_study.md").read_text()
         assert "| gear efficiency η |" in study and "∫τᵀτ dt on the plant" in study
         assert (tmp_path / "identified.toml").is_file() and (tmp_path / "identified.png").is_file()
+    if command[0] == "compensated_cut.py":
+        rows = json.loads((tmp_path / "compensated_cut.json").read_text())
+        assert len(rows) == 1 and rows[0]["compensated"]["completed"]
+        assert (tmp_path / "compensated_cut.png").is_file()
     if command[0] == "identification_coverage.py":
         rows = json.loads((tmp_path / "coverage.json").read_text())
         assert [row["sweep"] for row in rows] == [

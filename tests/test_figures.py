@@ -69,6 +69,10 @@ FIGURE_WRITERS = {
         "test_figures.py",
         "test_the_executed_cut_experiment_shows_the_cut_too",
     ),
+    "experiments/compensated_cut.py": (
+        "test_figures.py",
+        "test_the_compensated_cut_figure_keeps_the_rules",
+    ),
 }
 """Every file that writes a figure, and the test that saves its figures (checked)."""
 
@@ -553,3 +557,24 @@ def test_the_frames_figure_of_the_docs_keeps_the_rules() -> None:
     spec.loader.exec_module(module)
     problem = so.load_problem(ROOT / "problems" / "craniotomy_bone_flap.toml")
     assert figure_faults(module.frames_figure(problem)) == []
+
+
+def test_the_compensated_cut_figure_keeps_the_rules(tmp_path: Path) -> None:
+    rows = [
+        {
+            "plant": plant,
+            "flap": flap,
+            "planner": planner,
+            "tube_mm": 0.12,
+            "predicted_lead_mm": 0.05 + 0.01 * plant,
+            "lead": {"true_mm": 0.052 + 0.01 * plant},
+            "predicted_compensated_mm": 0.03 + 0.01 * plant,
+            "compensated": {"true_mm": 0.031 + 0.01 * plant},
+        }
+        for plant in (1, 2)
+        for flap in ("craniotomy_bone_flap", "craniotomy_five_landmarks")
+        for planner in ("toppra", "ocp-min-time")
+    ]
+    figure = _experiment("compensated_cut").figure(rows)
+    figure.savefig(tmp_path / "compensated_cut.png")  # checked as it is saved
+    assert (tmp_path / "compensated_cut.png").stat().st_size > 10_000

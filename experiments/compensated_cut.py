@@ -1,0 +1,302 @@
+"""The cut on robots that are not the model: identify → plan → predict → execute, with the
+lead alone and with the stream compensated on the identified model.
+
+    python experiments/compensated_cut.py --out docs/compensated_cut [--plants 10]
+        [--flaps craniotomy_bone_flap,craniotomy_five_landmarks] [--speed-mm-s 4]
+        [--tube-mm 0.12] [--planners toppra,ocp-min-jerk] [--iterations 2]
+        [--fit-seconds 30] [--part 0/1]
+
+Each plant is drawn from the family around ``prototype.toml``
+(:class:`~spm_opt.verify.plant_family.PlantFamily`, seed 2026: masses, mass-centre radii,
+friction, gear losses, rotor inertia and the loops' gains within their ranges) and
+identified from its own excitation log on the simulated robot (the robot file ``spm-opt
+identify`` would write, its loops estimated from the same log). Every flap is planned once
+on the planning model, at ``--speed-mm-s`` with a ``--tube-mm`` tube. For each plant, flap
+and planner: the cut predicted on the identified file, the plan executed on the plant (its
+true cut from the plant's true state), the stream compensated on the identified file
+(:func:`~spm_opt.verify.compensation.compensate`) and executed again. ``--part k/n``
+takes every n-th plant from the k-th (for two processes on two cores); ``--merge`` joins
+the parts' JSON into the tables. Writes ``compensated_cut.json`` (or a part's), and with
+all parts ``compensated_cut.md`` and ``compensated_cut.png`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+import spm_opt as so
+from spm_opt.base.markdown import markdown_table
+from spm_opt.execution import ExecutionSettings
+from spm_opt.identify.robot_file import robot_file_text
+from spm_opt.judge.limits import contour_tube
+from spm_opt.model.params import MM
+from spm_opt.studies.identified_plants import identify_plant
+from spm_opt.verify.compensation import compensate
+from spm_opt.verify.executed_cut import evaluate_log
+from spm_opt.verify.plant_family import PlantFamily
+from spm_opt.verify.predicted_cut import predict_cut
+
+ROOT = Path(__file__).resolve().parents[1]
+IDENTIFICATION = ROOT / "problems" / "identification.toml"
+IDENTIFY_RUN = ExecutionSettings(
+    rate_hz=100.0, current_reads_per_cycle=10, max_following_error_rad=np.radians(5.0)
+)
+"""The excitation's run, as experiments/identification_coverage.py runs it."""
+
+
+def progress(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def excitation(seconds: float, seed: int) -> so.Trajectory:
+    """identification.toml's excitation of ``seconds`` in 10 s periods."""
+    options = {
+        "duration_s": 10.0 * max(1, round(seconds / 10.0)),
+        "periods": max(1, round(seconds / 10.0)),
+        "seed": seed,
+        "max_iterations": 60,
+    }
+    problem = so.load_problem(IDENTIFICATION, {"planner.excitation": options})
+    return so.plan(problem, "excitation")
+
+
+def true_run(problem: so.Problem, plan: so.Trajectory, plant, work: Path, name: str) -> dict:
+    """``plan`` executed with the defaults on ``plant``: completed, the true cut (mm), the
+    true run's broken rules."""
+    backend = so.SimulatedRobot(
+        problem.robot,
+        start_rad=plan.position(plan.start_time),
+        settings=plant.settings,
+        plant_robot=plant.robot,
+    )
+    log = work / f"{name}.csv"
+    result = so.execute(plan, backend, problem, log, ExecutionSettings())
+    backend.trace.save(work / f"{name}.npz")
+    true = evaluate_log(problem, log, work / f"{name}.npz").true
+    return {
+        "completed": result.completed,
+        "outcome": result.reason,
+        "true_mm": true.max_contour_deviation_mm,
+        "true_broken": sorted({v.rule for v in true.violations}),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, default=Path("results/compensated_cut"))
+    parser.add_argument("--plants", type=int, default=10)
+    parser.add_argument("--flaps", default="craniotomy_bone_flap,craniotomy_five_landmarks")
+    parser.add_argument("--speed-mm-s", type=float, default=4.0)
+    parser.add_argument("--tube-mm", type=float, default=0.12)
+    parser.add_argument("--planners", default="toppra,ocp-min-jerk")
+    parser.add_argument("--iterations", type=int, default=2)
+    parser.add_argument("--fit-seconds", type=float, default=30.0)
+    parser.add_argument("--part", default="0/1")
+    parser.add_argument("--merge", action="store_true")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.merge:
+        rows = []
+        for part in sorted(args.out.glob("compensated_cut.part*.json")):
+            rows += json.loads(part.read_text())["rows"]
+        write_tables(args, rows)
+        return
+    part, parts = (int(v) for v in args.part.split("/"))
+    overrides = {
+        "limits.max_tool_speed_mm_s": args.speed_mm_s,
+        "limits.contour_tolerance_mm": args.tube_mm,
+    }
+    flaps = [
+        so.load_problem(ROOT / "problems" / f"{name}.toml", overrides)
+        for name in args.flaps.split(",")
+    ]
+    plans = {}
+    for problem in flaps:
+        for planner in args.planners.split(","):
+            started = time.perf_counter()
+            plans[problem.name, planner] = so.plan(problem, planner)
+            progress(f"{problem.name} {planner}: planned in {time.perf_counter() - started:.1f} s")
+    identification = so.load_problem(IDENTIFICATION)
+    fit, validation = excitation(args.fit_seconds, 0), excitation(20.0, 7)
+    family, rng = PlantFamily(identification.robot), np.random.default_rng(2026)
+    drawn = [family.draw(rng) for _ in range(args.plants)]
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        work = Path(folder)
+        for index in range(part, args.plants, parts):
+            plant = drawn[index]
+            progress(f"plant {index + 1} of {args.plants}: identifying")
+            identified = identify_plant(
+                identification, plant.robot, plant.settings, fit, validation, work, IDENTIFY_RUN
+            )
+            robot_path = work / f"plant{index}.toml"
+            robot_path.write_text(
+                robot_file_text(identified.identification, identified.loops, robot_path.stem)
+            )
+            model = so.load_robot(robot_path)
+            for (flap, planner), plan in plans.items():
+                problem = next(p for p in flaps if p.name == flap)
+                name = f"p{index}-{flap}-{planner}"
+                predicted = predict_cut(problem, plan, model)
+                lead = true_run(problem, plan, plant, work, f"{name}-lead")
+                started = time.perf_counter()
+                compensation = compensate(problem, plan, model, iterations=args.iterations)
+                compute_s = time.perf_counter() - started
+                compensated = true_run(problem, compensation.plan, plant, work, f"{name}-comp")
+                kept = compensation.predicted
+                row = {
+                    "plant": index + 1,
+                    "flap": flap,
+                    "planner": planner,
+                    "tube_mm": contour_tube(problem, executed=True) / MM,
+                    "planned_mm": so.evaluate(problem, plan).max_contour_deviation_mm,
+                    "predicted_lead_mm": predicted.deviation_mm,
+                    "lead": lead,
+                    "iterations_mm": [i.deviation_mm for i in compensation.iterations],
+                    "corrections": compensation.kept,
+                    "scale": compensation.plan.metadata["compensation"]["scale"],
+                    "predicted_compensated_mm": kept.deviation_mm,
+                    "compensated": compensated,
+                    "compensation_compute_s": compute_s,
+                    "plan_duration_s": plan.duration,
+                }
+                rows.append(row)
+                progress(
+                    f"  {flap} {planner}: lead predicted {row['predicted_lead_mm']:.3f}, true "
+                    f"{lead['true_mm']:.3f}; compensated predicted {kept.deviation_mm:.3f}, "
+                    f"true {compensated['true_mm']:.3f} mm ({compute_s:.0f} s)"
+                )
+    (args.out / f"compensated_cut.part{part}of{parts}.json").write_text(
+        json.dumps({"arguments": vars(args) | {"out": str(args.out)}, "rows": rows}, indent=1)
+    )
+    if parts == 1:
+        write_tables(args, rows)
+
+
+def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
+    """The markdown table, the JSON and the figure of every row."""
+    rows = sorted(rows, key=lambda r: (r["plant"], r["flap"], r["planner"]))
+    header = [
+        "plant",
+        "flap",
+        "planner",
+        "tube, mm",
+        "predicted (lead), mm",
+        "true (lead), mm",
+        "predicted (compensated), mm",
+        "true (compensated), mm",
+        "corrections",
+        "completed",
+        "broken on the true run (compensated)",
+    ]
+    table = markdown_table(
+        header,
+        [
+            [
+                str(r["plant"]),
+                r["flap"],
+                r["planner"],
+                f"{r['tube_mm']:.2f}",
+                f"{r['predicted_lead_mm']:.3f}",
+                f"{r['lead']['true_mm']:.3f}",
+                f"{r['predicted_compensated_mm']:.3f}",
+                f"{r['compensated']['true_mm']:.3f}",
+                f"{r['corrections']} (×{r['scale']:g})",
+                f"{'yes' if r['lead']['completed'] else 'no'} / "
+                f"{'yes' if r['compensated']['completed'] else 'no'}",
+                ", ".join(r["compensated"]["true_broken"]) or "none",
+            ]
+            for r in rows
+        ],
+    )
+    errors_lead = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
+    errors_comp = [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
+    inside_lead = sum(r["lead"]["true_mm"] <= r["tube_mm"] for r in rows)
+    inside_comp = sum(r["compensated"]["true_mm"] <= r["tube_mm"] for r in rows)
+    compute = [r["compensation_compute_s"] for r in rows]
+    summary = [
+        f"- Runs: {len(rows)}; true cut inside the tube: {inside_lead} with the lead alone, "
+        f"{inside_comp} compensated.",
+        f"- Prediction's error: worst {max(errors_lead):.4f} mm with the lead, "
+        f"{max(errors_comp):.4f} mm compensated (median {np.median(errors_lead):.4f} and "
+        f"{np.median(errors_comp):.4f}).",
+        f"- Compensation's compute: median {np.median(compute):.0f} s, at most "
+        f"{max(compute):.0f} s a plan; the compensated plans are as long as their plans.",
+    ]
+    text = (
+        "# The compensated cut on a family of plants\n\n"
+        f"`python experiments/compensated_cut.py --out {args.out} --plants {args.plants} "
+        f"--planners {args.planners} --flaps {args.flaps} --speed-mm-s {args.speed_mm_s:g} "
+        f"--tube-mm {args.tube_mm:g} --iterations {args.iterations} --part k/n` for each "
+        "part k of n, then the same with `--merge`. Each plant identified from its own "
+        f"{args.fit_seconds:g} s excitation; the prediction and the compensation on the "
+        "identified file; the true cut from the plant's true state, the plant running its "
+        "own loops. Plant numbers are the family's draws from seed 2026.\n\n"
+        + "\n".join(summary)
+        + "\n\n"
+        + "\n".join(table)
+        + "\n"
+    )
+    (args.out / "compensated_cut.md").write_text(text, encoding="utf-8")
+    (args.out / "compensated_cut.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    figure(rows).savefig(args.out / "compensated_cut.png", dpi=120)
+    print(text)
+
+
+def figure(rows: list[dict]) -> Figure:
+    """Left: the true cut against the predicted, lead alone and compensated. Right: the
+    compensated true cut against the lead alone's, by planner and flap, the tube as lines."""
+    fig = Figure(figsize=(11, 5), layout="constrained")
+    left, right = fig.subplots(1, 2)
+    for kind, colour, marker in (("lead", "tab:orange", "o"), ("compensated", "tab:green", "s")):
+        key = "predicted_lead_mm" if kind == "lead" else "predicted_compensated_mm"
+        left.scatter(
+            [r[key] for r in rows],
+            [r[kind]["true_mm"] for r in rows],
+            c=colour,
+            marker=marker,
+            label=kind,
+        )
+    top = max(max(r["lead"]["true_mm"], r["predicted_lead_mm"]) for r in rows) * 1.1
+    left.plot([0, top], [0, top], color="0.5", lw=1, label="predicted = true")
+    left.plot([0, top], [0.01, top + 0.01], color="0.5", lw=1, ls=":", label="±0.01 mm")
+    left.plot([0, top], [-0.01, top - 0.01], color="0.5", lw=1, ls=":")
+    left.set(xlabel="predicted cut (mm)", ylabel="true cut (mm)", title="prediction")
+    left.legend()
+    colours = {"toppra": "tab:blue", "ocp-min-time": "tab:red", "ocp-min-jerk": "tab:purple"}
+    markers: dict[str, str] = {}
+    for r in rows:
+        marker = markers.setdefault(r["flap"], "os^v"[len(markers) % 4])
+        right.scatter(
+            r["lead"]["true_mm"],
+            r["compensated"]["true_mm"],
+            c=colours.get(r["planner"], "0.3"),
+            marker=marker,
+        )
+    for planner, colour in colours.items():
+        right.scatter([], [], c=colour, label=planner)
+    for flap, marker in markers.items():
+        right.scatter([], [], c="0.5", marker=marker, label=flap.removeprefix("craniotomy_"))
+    tube = rows[0]["tube_mm"]
+    right.plot([0, top], [0, top], color="0.5", lw=1)
+    right.axhline(tube, color="k", ls="--", lw=1, label=f"tube {tube:g} mm")
+    right.axvline(tube, color="k", ls="--", lw=1)
+    right.set(
+        xlabel="true cut, lead alone (mm)",
+        ylabel="true cut, compensated (mm)",
+        title="true cut: compensated against the lead alone",
+    )
+    right.legend(fontsize=8)
+    return fig
+
+
+if __name__ == "__main__":
+    main()
