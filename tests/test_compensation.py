@@ -56,6 +56,7 @@ def robot_violations(problem, plan) -> list[str]:
     return [str(v) for v in evaluate(problem, plan).violations if RULES[v.rule].judges == ROBOT]
 
 
+@pytest.mark.slow
 def test_learned_on_the_model_the_true_cut_comes_nearer_the_contour(flap_plan, tmp_path):
     """prototype_plant.toml as the model, the plant running its control table's default
     loops (ωv 87 and 116 1/s against the file's 150): measured, the lead alone 0.089 mm,
@@ -162,6 +163,7 @@ def test_a_correction_that_would_break_a_limit_is_scaled_down_until_it_keeps_the
     )
 
 
+@pytest.mark.slow
 def test_the_command_writes_a_plan_that_execute_runs_and_refuses_careless_input(
     flap_plan, tmp_path, capsys
 ):

@@ -214,9 +214,10 @@ def test_a_random_plant_is_identified_within_its_errors_and_predicted_better(pla
 @pytest.mark.slow
 @pytest.mark.xdist_group("real time")  # its fits load both cores (OpenBLAS): the emulator's
 # real-time runs beside it stopped on a following error, so it runs where they run, in turn
-@pytest.mark.parametrize("batch", range(2))
+@pytest.mark.parametrize("batch", range(1))
 def test_plants_of_the_family_identified_with_honest_errors(plans, batch):
-    """25 plants a batch (two in CI, 50 plants: a batch takes about 4 min): every one
+    """25 plants a batch (one in CI: a batch took 4 min, and 6 min on the same machine on
+    a slower day; the second batch, ``range(2)``, measured below): every one
     passes :func:`check_plant`; on nearly all the plant's own model predicts within the
     noise; over the batch at least :data:`COVERAGE` of the identified parameters' truths lie
     within two standard errors; and the identified parameters further than

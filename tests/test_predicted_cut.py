@@ -88,6 +88,7 @@ def test_execute_refuses_a_plan_whose_predicted_cut_leaves_the_tube_unless_told_
     assert any(v["rule"] == "contour deviation" for v in report["violations"])
 
 
+@pytest.mark.slow
 def test_the_highest_feed_found_is_predicted_inside_and_the_next_tried_above_it_outside():
     """The paper's flap on prototype_plant.toml with its encoder offsets at zero, in a
     0.022 mm tube: toppra's plan is predicted at 0.028 mm at full feed, 0.024 at 0.75 and
