@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_bad_inputs import assert_one_error, run_cli
+from test_predicted_cut import FLAP, PLANT
 
 import spm_opt as so
 from spm_opt.execution import Executor, SimulatedRobot
@@ -30,10 +31,6 @@ from spm_opt.verify.compensation import (
 )
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.followed import Followed
-
-ROOT = Path(__file__).resolve().parents[1]
-FLAP = ROOT / "problems" / "craniotomy_bone_flap.toml"
-PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 
 
 @pytest.fixture(scope="module")

@@ -69,6 +69,8 @@ last this many seconds, s."""
 LEAST_GAIN_MM = 0.001
 """A correction is kept only if its predicted cut is at least this much nearer the contour
 than the last one kept, mm."""
+LEARNED_AT = ("feed", "rate_hz", "tracking")
+"""The run's settings a correction was learned at, which its record keeps."""
 DEFAULT_ITERATIONS = 3
 """Runs of the model :func:`compensate` learns from by default."""
 
@@ -199,7 +201,8 @@ def compensate(
             break  # a run that stopped has no error to learn from along the whole plan
         grid, correction = correction_of(base, followed)
         stream = within_limits(problem, base, grid, correction, {})
-    record = _record(base, "model", robot.name, settings, history, kept)
+    learned_at = {"feed": settings.feed, "rate_hz": settings.rate_hz, "tracking": settings.tracking}
+    record = _record(base, "model", robot.name, learned_at, history, kept)
     record["scale"] = kept_stream.metadata.get("compensation", {}).get("scale", 0.0)
     metadata = {**base.metadata, "compensation": record}
     metadata.pop("samples", None)  # the corrected samples are recorded when written
@@ -226,9 +229,7 @@ def compensate_from_run(problem: Problem, base: Trajectory, log_path: str | Path
         base,
         "dry run",
         (header.get("problem") or {}).get("robot", {}).get("name", "the robot"),
-        ExecutionSettings(
-            **{k: settings[k] for k in ("rate_hz", "feed", "tracking") if k in settings}
-        ),
+        {key: settings.get(key) for key in LEARNED_AT},
         history,
         len(history),
     )
@@ -321,7 +322,7 @@ def _record(
     base: Trajectory,
     source: str,
     robot: str,
-    settings: ExecutionSettings,
+    learned_at: dict[str, Any],
     history: list[Iteration],
     kept: int,
 ) -> dict[str, Any]:
@@ -331,9 +332,7 @@ def _record(
         "robot": robot,
         "of_plan": base.metadata.get("samples"),
         "planner": base.metadata.get("planner"),
-        "feed": settings.feed,
-        "rate_hz": settings.rate_hz,
-        "tracking": settings.tracking,
+        **learned_at,
         "cutoff_hz": CUTOFF_HZ,
         "taper_s": TAPER_S,
         "iterations": [item.record() for item in history],
