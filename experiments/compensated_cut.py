@@ -42,7 +42,7 @@ from spm_opt.studies.identified_plants import identify_plant
 from spm_opt.verify.compensation import compensate
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.plant_family import PlantFamily
-from spm_opt.verify.predicted_cut import predict_cut
+from spm_opt.verify.predicted_cut import highest_feed_inside, predict_cut
 
 ROOT = Path(__file__).resolve().parents[1]
 IDENTIFICATION = ROOT / "problems" / "identification.toml"
@@ -68,9 +68,16 @@ def excitation(seconds: float, seed: int) -> so.Trajectory:
     return so.plan(problem, "excitation")
 
 
-def true_run(problem: so.Problem, plan: so.Trajectory, plant, work: Path, name: str) -> dict:
-    """``plan`` executed with the defaults on ``plant``: completed, the true cut (mm), the
-    true run's broken rules."""
+def true_run(
+    problem: so.Problem,
+    plan: so.Trajectory,
+    plant,
+    work: Path,
+    name: str,
+    settings: ExecutionSettings | None = None,
+) -> dict:
+    """``plan`` executed on ``plant`` with ``settings`` (default: the defaults): completed,
+    the true cut (mm), the true run's broken rules."""
     backend = so.SimulatedRobot(
         problem.robot,
         start_rad=plan.position(plan.start_time),
@@ -78,7 +85,7 @@ def true_run(problem: so.Problem, plan: so.Trajectory, plant, work: Path, name: 
         plant_robot=plant.robot,
     )
     log = work / f"{name}.csv"
-    result = so.execute(plan, backend, problem, log, ExecutionSettings())
+    result = so.execute(plan, backend, problem, log, settings or ExecutionSettings())
     backend.trace.save(work / f"{name}.npz")
     true = evaluate_log(problem, log, work / f"{name}.npz").true
     return {
@@ -94,7 +101,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results/compensated_cut"))
     parser.add_argument("--plants", type=int, default=10)
     parser.add_argument("--flaps", default="craniotomy_bone_flap,craniotomy_five_landmarks")
-    parser.add_argument("--speed-mm-s", type=float, default=4.0)
+    parser.add_argument("--speed-mm-s", default="4", help="comma-separated, mm/s")
     parser.add_argument("--tube-mm", type=float, default=0.12)
     parser.add_argument("--planners", default="toppra,ocp-min-jerk")
     parser.add_argument("--iterations", type=int, default=2)
@@ -104,26 +111,32 @@ def main() -> None:
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     if args.merge:
-        rows = []
+        rows, study = [], vars(args)
         for part in sorted(args.out.glob("compensated_cut.part*.json")):
-            rows += json.loads(part.read_text())["rows"]
-        write_tables(args, rows)
+            written = json.loads(part.read_text())
+            rows += written["rows"]
+            study = written.get("arguments", study)  # the parts' settings, not the merge's
+        write_tables(argparse.Namespace(**(study | {"out": args.out})), rows)
         return
     part, parts = (int(v) for v in args.part.split("/"))
-    overrides = {
-        "limits.max_tool_speed_mm_s": args.speed_mm_s,
-        "limits.contour_tolerance_mm": args.tube_mm,
-    }
-    flaps = [
-        so.load_problem(ROOT / "problems" / f"{name}.toml", overrides)
+    speeds = [float(v) for v in args.speed_mm_s.split(",")]
+    flaps = {
+        (name, speed): so.load_problem(
+            ROOT / "problems" / f"{name}.toml",
+            {"limits.max_tool_speed_mm_s": speed, "limits.contour_tolerance_mm": args.tube_mm},
+        )
         for name in args.flaps.split(",")
-    ]
+        for speed in speeds
+    }
     plans = {}
-    for problem in flaps:
+    for (name, speed), problem in flaps.items():
         for planner in args.planners.split(","):
             started = time.perf_counter()
-            plans[problem.name, planner] = so.plan(problem, planner)
-            progress(f"{problem.name} {planner}: planned in {time.perf_counter() - started:.1f} s")
+            plans[name, speed, planner] = so.plan(problem, planner)
+            progress(
+                f"{name} at {speed:g} mm/s, {planner}: planned in "
+                f"{time.perf_counter() - started:.1f} s"
+            )
     identification = so.load_problem(IDENTIFICATION)
     fit, validation = excitation(args.fit_seconds, 0), excitation(20.0, 7)
     family, rng = PlantFamily(identification.robot), np.random.default_rng(2026)
@@ -142,9 +155,9 @@ def main() -> None:
                 robot_file_text(identified.identification, identified.loops, robot_path.stem)
             )
             model = so.load_robot(robot_path)
-            for (flap, planner), plan in plans.items():
-                problem = next(p for p in flaps if p.name == flap)
-                name = f"p{index}-{flap}-{planner}"
+            for (flap, speed, planner), plan in plans.items():
+                problem = flaps[flap, speed]
+                name = f"p{index}-{flap}-{speed:g}-{planner}"
                 predicted = predict_cut(problem, plan, model)
                 lead = true_run(problem, plan, plant, work, f"{name}-lead")
                 started = time.perf_counter()
@@ -152,21 +165,36 @@ def main() -> None:
                 compute_s = time.perf_counter() - started
                 compensated = true_run(problem, compensation.plan, plant, work, f"{name}-comp")
                 kept = compensation.predicted
+                slower = None
+                if not kept.inside:  # the lab's next step: the lead plan at the highest feed
+                    found = highest_feed_inside(problem, plan, model)
+                    if found is not None:
+                        feed, at_feed = found
+                        run = true_run(
+                            problem, plan, plant, work, f"{name}-feed", ExecutionSettings(feed=feed)
+                        )
+                        slower = {"feed": feed, "predicted_mm": at_feed.deviation_mm, "run": run}
                 row = {
                     "plant": index + 1,
                     "flap": flap,
+                    "speed_mm_s": speed,
                     "planner": planner,
                     "tube_mm": contour_tube(problem, executed=True) / MM,
                     "planned_mm": so.evaluate(problem, plan).max_contour_deviation_mm,
                     "predicted_lead_mm": predicted.deviation_mm,
+                    "predicted_lead_inside": predicted.inside,
                     "lead": lead,
                     "iterations_mm": [i.deviation_mm for i in compensation.iterations],
                     "corrections": compensation.kept,
                     "scale": compensation.plan.metadata["compensation"]["scale"],
                     "predicted_compensated_mm": kept.deviation_mm,
+                    "predicted_compensated_inside": kept.inside,
                     "compensated": compensated,
+                    "highest_feed": slower,
                     "compensation_compute_s": compute_s,
                     "plan_duration_s": plan.duration,
+                    "plant_bandwidth_per_s": plant.loops()[1].tolist(),
+                    "file_bandwidth_per_s": list(model.actuator.velocity_loop_bandwidth_per_s),
                 }
                 rows.append(row)
                 progress(
@@ -174,76 +202,155 @@ def main() -> None:
                     f"{lead['true_mm']:.3f}; compensated predicted {kept.deviation_mm:.3f}, "
                     f"true {compensated['true_mm']:.3f} mm ({compute_s:.0f} s)"
                 )
-    (args.out / f"compensated_cut.part{part}of{parts}.json").write_text(
+    label = "-".join(f"{speed:g}" for speed in speeds)
+    (args.out / f"compensated_cut.part{part}of{parts}.{label}mm_s.json").write_text(
         json.dumps({"arguments": vars(args) | {"out": str(args.out)}, "rows": rows}, indent=1)
     )
     if parts == 1:
         write_tables(args, rows)
 
 
+def lab_run(row: dict) -> tuple[float | None, dict | None, float | None]:
+    """The run a lab makes after the prediction: the compensated stream where its predicted
+    cut is inside, else the lead plan at the highest feed predicted inside. Returns (the
+    feed, the run, its predicted cut, mm); the run None where no feed is predicted inside."""
+    if row["predicted_compensated_inside"]:
+        return 1.0, row["compensated"], row["predicted_compensated_mm"]
+    slower = row["highest_feed"]
+    if slower is None:
+        return None, None, None
+    return slower["feed"], slower["run"], slower["predicted_mm"]
+
+
+def summary_lines(rows: list[dict]) -> list[str]:
+    """What the rows of one speed say, a line each."""
+    runs = [lab_run(r) for r in rows]
+    errors = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
+    errors += [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
+    errors += [abs(predicted - run["true_mm"]) for _, run, predicted in runs if run]
+    inside = [
+        run is not None and run["completed"] and run["true_mm"] <= r["tube_mm"]
+        for r, (_, run, _) in zip(rows, runs, strict=True)
+    ]
+    slower = [(r, feed) for r, (feed, _, _) in zip(rows, runs, strict=True) if feed != 1.0]
+    broken: dict[str, int] = {}
+    for _, run, _ in runs:
+        for rule in run["true_broken"] if run else []:
+            broken[rule] = broken.get(rule, 0) + 1
+    compute = [r["compensation_compute_s"] for r in rows]
+    return [
+        f"- Runs: {len(rows)}; true cut inside the tube: "
+        f"{sum(r['lead']['true_mm'] <= r['tube_mm'] for r in rows)} with the lead alone, "
+        f"{sum(r['compensated']['true_mm'] <= r['tube_mm'] for r in rows)} compensated; "
+        f"the lab's run (compensated where predicted inside, else the highest feed predicted "
+        f"inside): {sum(inside)} of {len(rows)} completed inside.",
+        f"- Predicted outside even compensated, before any run: {len(slower)}"
+        + (
+            " ("
+            + "; ".join(
+                f"plant {r['plant']} {r['flap'].removeprefix('craniotomy_')} {r['planner']}: "
+                + (f"feed {feed:.2f}" if feed is not None else "no feed")
+                for r, feed in slower
+            )
+            + ")."
+            if slower
+            else "."
+        ),
+        f"- Prediction's error over every run (lead, compensated, slower): worst "
+        f"{max(errors):.4f} mm, median {np.median(errors):.4f}; over 0.01 mm on "
+        f"{sum(e > 0.01 for e in errors)} of {len(errors)}.",
+        "- Rules the lab's true runs break: "
+        + (", ".join(f"{rule} on {n}" for rule, n in sorted(broken.items())) or "none")
+        + ".",
+        f"- Compensation's compute: median {np.median(compute):.0f} s, at most "
+        f"{max(compute):.0f} s a plan; the compensated plans are as long as their plans.",
+    ]
+
+
+def runs_by_speed(rows: list[dict]) -> str:
+    """'plants 1–10 at 4 mm/s, plants 1–3 at 3 and 5 mm/s' of the rows."""
+    plants: dict[float, set[int]] = {}
+    for r in rows:
+        plants.setdefault(r["speed_mm_s"], set()).add(r["plant"])
+    by_plants: dict[str, list[float]] = {}
+    for speed, numbers in sorted(plants.items()):
+        span = f"{min(numbers)}–{max(numbers)}" if len(numbers) > 1 else f"{min(numbers)}"
+        by_plants.setdefault(f"plants {span}", []).append(speed)
+    return ", ".join(
+        f"{label} at {' and '.join(f'{v:g}' for v in speeds)} mm/s"
+        for label, speeds in by_plants.items()
+    )
+
+
 def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
-    """The markdown table, the JSON and the figure of every row."""
-    rows = sorted(rows, key=lambda r: (r["plant"], r["flap"], r["planner"]))
+    """The markdown tables, the JSON and the figure of every row."""
+    rows = sorted(rows, key=lambda r: (r["speed_mm_s"], r["plant"], r["flap"], r["planner"]))
     header = [
         "plant",
         "flap",
         "planner",
-        "tube, mm",
         "predicted (lead), mm",
         "true (lead), mm",
         "predicted (compensated), mm",
         "true (compensated), mm",
         "corrections",
+        "highest feed predicted inside: predicted / true, mm",
         "completed",
-        "broken on the true run (compensated)",
+        "broken on the lab's true run",
     ]
-    table = markdown_table(
-        header,
-        [
-            [
-                str(r["plant"]),
-                r["flap"],
-                r["planner"],
-                f"{r['tube_mm']:.2f}",
-                f"{r['predicted_lead_mm']:.3f}",
-                f"{r['lead']['true_mm']:.3f}",
-                f"{r['predicted_compensated_mm']:.3f}",
-                f"{r['compensated']['true_mm']:.3f}",
-                f"{r['corrections']} (×{r['scale']:g})",
-                f"{'yes' if r['lead']['completed'] else 'no'} / "
-                f"{'yes' if r['compensated']['completed'] else 'no'}",
-                ", ".join(r["compensated"]["true_broken"]) or "none",
-            ]
-            for r in rows
-        ],
-    )
-    errors_lead = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
-    errors_comp = [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
-    inside_lead = sum(r["lead"]["true_mm"] <= r["tube_mm"] for r in rows)
-    inside_comp = sum(r["compensated"]["true_mm"] <= r["tube_mm"] for r in rows)
-    compute = [r["compensation_compute_s"] for r in rows]
-    summary = [
-        f"- Runs: {len(rows)}; true cut inside the tube: {inside_lead} with the lead alone, "
-        f"{inside_comp} compensated.",
-        f"- Prediction's error: worst {max(errors_lead):.4f} mm with the lead, "
-        f"{max(errors_comp):.4f} mm compensated (median {np.median(errors_lead):.4f} and "
-        f"{np.median(errors_comp):.4f}).",
-        f"- Compensation's compute: median {np.median(compute):.0f} s, at most "
-        f"{max(compute):.0f} s a plan; the compensated plans are as long as their plans.",
-    ]
+
+    def cells(r: dict) -> list[str]:
+        slower = r["highest_feed"]
+        feed, run, _ = lab_run(r)
+        return [
+            str(r["plant"]),
+            r["flap"].removeprefix("craniotomy_"),
+            r["planner"],
+            f"{r['predicted_lead_mm']:.3f}",
+            f"{r['lead']['true_mm']:.3f}",
+            f"{r['predicted_compensated_mm']:.3f}",
+            f"{r['compensated']['true_mm']:.3f}",
+            f"{r['corrections']} (×{r['scale']:g})",
+            "—"
+            if r["predicted_compensated_inside"]
+            else (
+                "none"
+                if slower is None
+                else f"{slower['feed']:.2f}: {slower['predicted_mm']:.3f} / "
+                f"{slower['run']['true_mm']:.3f}"
+            ),
+            " / ".join(
+                "yes" if run_["completed"] else "no"
+                for run_ in (r["lead"], r["compensated"], *([run] if feed != 1.0 and run else []))
+            ),
+            ", ".join(run["true_broken"]) if run else "(not run)",
+        ]
+
+    sections = []
+    for speed in sorted({r["speed_mm_s"] for r in rows}):
+        chosen = [r for r in rows if r["speed_mm_s"] == speed]
+        sections += [
+            f"## {speed:g} mm/s, tube {chosen[0]['tube_mm']:g} mm",
+            "",
+            *summary_lines(chosen),
+            "",
+            *markdown_table(header, [cells(r) for r in chosen]),
+            "",
+        ]
     text = (
         "# The compensated cut on a family of plants\n\n"
-        f"`python experiments/compensated_cut.py --out {args.out} --plants {args.plants} "
-        f"--planners {args.planners} --flaps {args.flaps} --speed-mm-s {args.speed_mm_s:g} "
+        f"`python experiments/compensated_cut.py --out {args.out} --plants N "
+        f"--planners {args.planners} --flaps {args.flaps} --speed-mm-s S "
         f"--tube-mm {args.tube_mm:g} --iterations {args.iterations} --part k/n` for each "
-        "part k of n, then the same with `--merge`. Each plant identified from its own "
-        f"{args.fit_seconds:g} s excitation; the prediction and the compensation on the "
-        "identified file; the true cut from the plant's true state, the plant running its "
-        "own loops. Plant numbers are the family's draws from seed 2026.\n\n"
-        + "\n".join(summary)
-        + "\n\n"
-        + "\n".join(table)
-        + "\n"
+        f"part k of n (the runs below: {runs_by_speed(rows)}), then the same with `--merge`. "
+        "Each plant identified from its own "
+        f"{args.fit_seconds:g} s excitation (its velocity loops from the log's replay); the "
+        "prediction and the compensation on the identified file; the true cut from the "
+        "plant's true state, the plant running its own loops. Plant numbers are the family's "
+        "draws from seed 2026. Where the compensated stream's predicted cut leaves the tube, "
+        "the lab's run is the lead plan at the highest feed predicted inside "
+        "(`spm-opt predict --highest-feed`). Completed: lead / compensated / slower.\n\n"
+        + "\n".join(sections)
     )
     (args.out / "compensated_cut.md").write_text(text, encoding="utf-8")
     (args.out / "compensated_cut.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
@@ -265,12 +372,20 @@ def figure(rows: list[dict]) -> Figure:
             marker=marker,
             label=kind,
         )
+    slower = [r["highest_feed"] for r in rows if r.get("highest_feed")]
+    left.scatter(
+        [s["predicted_mm"] for s in slower],
+        [s["run"]["true_mm"] for s in slower],
+        c="tab:blue",
+        marker="^",
+        label="lead at the highest feed predicted inside",
+    )
     top = max(max(r["lead"]["true_mm"], r["predicted_lead_mm"]) for r in rows) * 1.1
     left.plot([0, top], [0, top], color="0.5", lw=1, label="predicted = true")
     left.plot([0, top], [0.01, top + 0.01], color="0.5", lw=1, ls=":", label="±0.01 mm")
     left.plot([0, top], [-0.01, top - 0.01], color="0.5", lw=1, ls=":")
     left.set(xlabel="predicted cut (mm)", ylabel="true cut (mm)", title="prediction")
-    left.legend()
+    left.legend(loc="lower right", fontsize=8)
     colours = {"toppra": "tab:blue", "ocp-min-time": "tab:red", "ocp-min-jerk": "tab:purple"}
     markers: dict[str, str] = {}
     for r in rows:

@@ -14,9 +14,11 @@ were from the plan (the true tracking error) and how far the true cut was from t
 contour. Beside each run, the cut predicted before it
 (:func:`spm_opt.verify.predicted_cut.predict_cut`) with the plant's own file as the model:
 its loops are the file's (the default ωv of 150 1/s), while the plant runs the control
-table's default gains (ωv 87 and 116 1/s on that plant), a mismatch a lab has too, as no
-log identifies ωv. ``--backend emulator`` runs the same through the real Dynamixel SDK against the
-emulated actuators, in real time (about two minutes; keep the machine otherwise idle:
+table's default gains (ωv 87 and 116 1/s on that plant). ``--model ROBOT`` predicts on
+another robot file instead, such as the one ``spm-opt identify`` wrote from the plant's
+own logs (``experiments/identify_prototype.py``'s ``identified.toml``). ``--backend
+emulator`` runs the same through the real Dynamixel SDK against the emulated actuators, in
+real time (about two minutes; keep the machine otherwise idle:
 a loop that stalls for 0.2 s is a following error). Writes ``executed_cut.md``,
 ``executed_cut.json`` and ``executed_cut.png`` into ``--out``.
 """
@@ -109,8 +111,10 @@ def run_one(
     plant: tuple[str, Robot],
     tracking: str,
     work: Path,
+    model: Robot | None,
 ) -> Row:
-    """Execute ``plan`` with ``tracking`` on ``plant`` and judge the run."""
+    """Execute ``plan`` with ``tracking`` on ``plant`` and judge the run; its cut predicted
+    on ``model`` (default: the plant's own file)."""
     name = f"{problem.name}-{plan.metadata['planner']}-{plant[0].replace(' ', '_')}-{tracking}"
     log, trace = work / f"{name}.csv", work / f"{name}.npz"
     settings = so.ExecutionSettings(tracking=tracking)
@@ -120,7 +124,7 @@ def run_one(
     reports = evaluate_log(problem, log, trace)
     true = reports.true
     assert true is not None
-    predicted = predict_cut(problem, plan, plant[1], settings)
+    predicted = predict_cut(problem, plan, model or plant[1], settings)
     tube = contour_tube(problem, executed=True)
     return Row(
         problem=problem.name,
@@ -139,8 +143,11 @@ def run_one(
     )
 
 
-def run(kind: str, problems: list[str], planners: list[str], work: Path) -> list[Row]:
-    """Every planner's clean plan of each problem, on each plant, with each tracking."""
+def run(
+    kind: str, problems: list[str], planners: list[str], work: Path, model: Robot | None
+) -> list[Row]:
+    """Every planner's clean plan of each problem, on each plant, with each tracking, the
+    cut predicted on ``model`` (default: each plant's own file)."""
     rows = []
     for problem_name in problems:
         problem = so.load_problem(ROOT / "problems" / f"{problem_name}.toml")
@@ -151,7 +158,7 @@ def run(kind: str, problems: list[str], planners: list[str], work: Path) -> list
                 continue
             for plant in _plants(problem_name):
                 for tracking in TRACKINGS:
-                    row = run_one(kind, problem, plan, plant, tracking, work)
+                    row = run_one(kind, problem, plan, plant, tracking, work, model)
                     print(
                         f"{problem_name} {planner} ({plant[0]}, {tracking}): "
                         f"{'completed' if row.completed else row.outcome}; tracking "
@@ -294,16 +301,29 @@ def main(argv: list[str] | None = None) -> int:
         default="cubic,toppra,ocp-min-time,ocp-min-energy,ocp-min-jerk,ocp-mix,ruckig",
         help="comma-separated planner names",
     )
+    parser.add_argument(
+        "--model",
+        type=Path,
+        help="the robot file the predictions run on (default: the plant's own file), e.g. "
+        "one spm-opt identify wrote from the plant's logs",
+    )
     args = parser.parse_args(argv)
+    model = None if args.model is None else so.load_robot(args.model)
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as work:
-        rows = run(args.backend, args.problems.split(","), args.planners.split(","), Path(work))
+        problems, planners = args.problems.split(","), args.planners.split(",")
+        rows = run(args.backend, problems, planners, Path(work), model)
     data: list[dict[str, Any]] = [dataclasses.asdict(r) for r in rows]
     (args.out / "executed_cut.json").write_text(json.dumps(data, indent=2) + "\n")
+    predicted_on = "" if args.model is None else f" --model {args.model}"
     text = (
         f"# The executed cut ({args.backend})\n\n"
         "`python experiments/executed_cut.py --out DIR --backend "
-        f"{args.backend}` wrote this.\n\n" + table(rows) + "\n"
+        f"{args.backend} --planners {args.planners}{predicted_on}` wrote this. Predicted on "
+        + ("each plant's own file" if model is None else f"`{args.model}`")
+        + ".\n\n"
+        + table(rows)
+        + "\n"
     )
     (args.out / "executed_cut.md").write_text(text)
     figure(rows, args.out / "executed_cut.png")

@@ -408,6 +408,16 @@ def test_cycles_against_the_emulator_in_a_child_process(robot):
     np.testing.assert_allclose(measurement.position_rad, goal, atol=np.deg2rad(1.5))
 
 
+def test_a_child_emulator_starts_where_a_first_angle_below_zero_says(robot):
+    """``--start-deg -12.5,3`` once read as an option of its own: the child refused."""
+    with spawn_emulator(start_deg=(-12.5, 3.0)) as child:
+        backend = DynamixelRobot(robot.actuator, child.device)
+        backend.connect()
+        measured = backend.read().position_rad
+        backend.close()
+    np.testing.assert_allclose(measured, np.deg2rad([-12.5, 3.0]), atol=np.deg2rad(0.1))
+
+
 def test_a_vanished_device_is_a_communication_error_every_time(robot):
     with connected(robot) as (emulator, backend):
         emulator.close()  # as if the adapter were unplugged

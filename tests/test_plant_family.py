@@ -133,11 +133,13 @@ def plans():
     return problem, so.plan(problem, "excitation"), so.plan(validation, "excitation")
 
 
-def identified(plans, plant) -> PlantIdentification:
+def identified(plans, plant, replay: bool = True) -> PlantIdentification:
+    """``plant`` identified; with ``replay``, its velocity loops from the log's replay too
+    (about 10 s a plant, which the 25-plant sweep leaves out)."""
     problem, excitation, validation = plans
     with tempfile.TemporaryDirectory() as folder:
         return identify_plant(
-            problem, plant.robot, plant.settings, excitation, validation, Path(folder), RUN
+            problem, plant.robot, plant.settings, excitation, validation, Path(folder), RUN, replay
         )
 
 
@@ -166,7 +168,10 @@ def misses(result: PlantIdentification) -> list[str]:
 def check_plant(result: PlantIdentification) -> None:
     """What must hold on every plant: the identified robot predicts the validation torques
     :data:`GAIN` times better than the prior (or within the noise) and each loop estimate
-    lies within 10 % of the plant's or is not carried."""
+    lies within its share of the plant's or is not carried: Kp 10 %; ωv from the replay
+    15 %, for the replay's ωv is what makes the *identified* model's velocities the plant's
+    and so takes up that model's errors too (the family's lightest corner, η 0.7 identified
+    0.663: 67.3 and 64.4 1/s against 60.1 and 60.4)."""
     room = np.maximum(result.prior_rms / GAIN, NOISE_ROOM * result.plant_rms)
     assert np.all(result.identified_rms <= room), (
         result.prior_rms,
@@ -175,14 +180,19 @@ def check_plant(result: PlantIdentification) -> None:
     )
     loops = result.loops
     carried = loops.robot(PRIOR).actuator
-    for estimate, reasons, truth in (
-        (carried.position_loop_gain_per_s, loops.gain_reason, result.plant_loops[0]),
-        (carried.velocity_loop_bandwidth_per_s, loops.bandwidth_reason, result.plant_loops[1]),
+    for estimate, reasons, truth, share in (
+        (carried.position_loop_gain_per_s, loops.gain_reason, result.plant_loops[0], 0.1),
+        (
+            carried.velocity_loop_bandwidth_per_s,
+            loops.bandwidth_reason if loops.replay is None else loops.replay.reason,
+            result.plant_loops[1],
+            0.1 if loops.replay is None else 0.15,
+        ),
     ):
         for joint in range(2):
             if reasons[joint]:  # not identifiable from this log: the prior kept
                 continue
-            assert abs(estimate[joint] - truth[joint]) <= 0.1 * truth[joint], (estimate, truth)
+            assert abs(estimate[joint] - truth[joint]) <= share * truth[joint], (estimate, truth)
 
 
 @pytest.mark.xdist_group("real time")  # as the slow sweep below, for the same reason
@@ -229,7 +239,7 @@ def test_plants_of_the_family_identified_with_honest_errors(plans, batch):
     and 85.0 %, the upper rail's or the second joint's Coulomb friction beyond on 5 and 1
     plants, η on 0 and 1)."""
     rng = np.random.default_rng(1000 + batch)
-    results = [identified(plans, FAMILY.draw(rng)) for _ in range(25)]
+    results = [identified(plans, FAMILY.draw(rng), replay=False) for _ in range(25)]
     for result in results:
         check_plant(result)
     assert sum(result.model_holds() for result in results) >= 24, [r.plant_rms for r in results]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import math
@@ -499,6 +500,7 @@ def _identify(args: argparse.Namespace) -> None:
         plan_period,
         prediction_rms,
     )
+    from spm_opt.identify.velocity_replay import replay_bandwidth
     from spm_opt.problem.problem import load_problem
     from spm_opt.report.plots import to_png
 
@@ -532,6 +534,9 @@ def _identify(args: argparse.Namespace) -> None:
     if args.validate is not None:
         validation = log_samples([args.validate], args.cutoff_hz, decimation, args.min_speed)
         checked.append((f"{args.validate.name} (not fitted)", validation))
+    _LOG.info("identify: replaying the logs through the identified model for the velocity loops")
+    replay = replay_bandwidth(args.logs, loops.robot(identification.robot))
+    loops = dataclasses.replace(loops, replay=replay)
     predictions = [
         (label, prediction_rms(problem.robot, part), prediction_rms(identification.robot, part))
         for label, part in checked

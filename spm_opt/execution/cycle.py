@@ -101,6 +101,37 @@ class Ticker:
 
 
 @dataclass
+class CycleTiming:
+    """When, after a cycle's time, its read sampled the actuators (the read call's
+    middle) and its goal write returned: the means over the run, s, each offset within one
+    period. Identification's replay (:mod:`spm_opt.identify.velocity_replay`) reads and
+    writes its model at these instants; on the simulated robot both are 0."""
+
+    period_s: float
+    read_sum_s: float = 0.0
+    reads: int = 0
+    write_sum_s: float = 0.0
+    writes: int = 0
+
+    def read(self, offset_s: float) -> None:
+        """Count one read made ``offset_s`` after its cycle's time."""
+        self.read_sum_s += min(max(offset_s, 0.0), self.period_s)
+        self.reads += 1
+
+    def wrote(self, offset_s: float) -> None:
+        """Count one goal write returned ``offset_s`` after its cycle's time."""
+        self.write_sum_s += min(max(offset_s, 0.0), self.period_s)
+        self.writes += 1
+
+    def record(self) -> dict[str, float]:
+        """The header's ``cycle_timing``: ``read_s`` and ``goal_written_s``, the means."""
+        return {
+            "read_s": self.read_sum_s / max(self.reads, 1),
+            "goal_written_s": self.write_sum_s / max(self.writes, 1),
+        }
+
+
+@dataclass
 class Cycle:
     """One control cycle: when it began (s, the time its goal is sampled at), what it
     read and what went wrong (``notes``; ``unexpected``: the backend raised something
@@ -200,6 +231,7 @@ class ControlLoop:
         self.failed_cycles = self.reads_failed = self.writes_failed = 0
         self.current_reads_missed = 0
         self.current_read_s = 0.0
+        self.timing = CycleTiming(self.ticker.period)
         self._goal_written_at = -math.inf
         self._phases = random.Random(0)  # where in its part each current read falls
         self.previous = (-self.ticker.period, True)
@@ -221,7 +253,10 @@ class ControlLoop:
         if unexpected is not None:
             cycle.notes.append(self._failure("current read", unexpected, cycle))
         try:
+            before = self._backend.clock.now()
             cycle.measurement = self.last_measurement = self._backend.read()
+            middle = 0.5 * (before + self._backend.clock.now()) - self.ticker.origin
+            self.timing.read(middle - cycle.time_s)
         except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
             cycle.read_failed = True
             self.reads_failed += 1
@@ -278,6 +313,7 @@ class ControlLoop:
             cycle.notes.append(self._failure("write", error, cycle))
             return False
         cycle.written_at = self._goal_written_at = self._backend.clock.now()
+        self.timing.wrote(cycle.written_at - self.ticker.origin - cycle.time_s)
         commanded = self.commanded
         commanded.position, commanded.velocity = position, velocity
         commanded.acceleration, commanded.goal = acceleration, goal

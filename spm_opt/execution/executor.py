@@ -288,6 +288,7 @@ class Executor:
                         "missed": loop.current_reads_missed,
                         "read_s": loop.current_read_s,
                     },
+                    "cycle_timing": loop.timing.record(),
                     "backend": backend_state,
                     "exception": exception,
                 }

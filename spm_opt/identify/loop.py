@@ -104,6 +104,7 @@ from spm_opt.identify.samples import (
     log_values,
     named,
 )
+from spm_opt.identify.velocity_replay import BandwidthReplay
 from spm_opt.model.actuator import LOOP_RATE_RANGE_PER_S
 from spm_opt.model.params import Robot
 
@@ -143,6 +144,10 @@ class LoopEstimate:
         RMS of the logged goals less the estimated loops' (filtered), rad.
     periods : int
         Control periods used.
+    replay : BandwidthReplay or None
+        ωv from the logs' velocities replayed through the identified model
+        (:func:`~spm_opt.identify.velocity_replay.replay_bandwidth`): where present, it
+        decides each joint's ωv in the robot file.
     """
 
     gain_per_s: np.ndarray
@@ -157,6 +162,7 @@ class LoopEstimate:
     bandwidth_reason: tuple[str, str]
     residual_rad: np.ndarray
     periods: int
+    replay: BandwidthReplay | None = None
 
     @property
     def gain_carried(self) -> np.ndarray:
@@ -169,7 +175,8 @@ class LoopEstimate:
         return np.array([not reason for reason in self.bandwidth_reason])
 
     def robot(self, robot: Robot) -> Robot:
-        """``robot`` with each joint's loop parameters the estimate where carried."""
+        """``robot`` with each joint's loop parameters the estimate where carried (ωv the
+        replay's, where there is one)."""
         gain = np.where(self.gain_carried, self.gain_per_s, self.prior_gain_per_s)
         bandwidth = np.where(
             self.bandwidth_carried, self.bandwidth_per_s, self.prior_bandwidth_per_s
@@ -179,7 +186,14 @@ class LoopEstimate:
             position_loop_gain_per_s=(float(gain[0]), float(gain[1])),
             velocity_loop_bandwidth_per_s=(float(bandwidth[0]), float(bandwidth[1])),
         )
-        return dataclasses.replace(robot, actuator=actuator)
+        led = dataclasses.replace(robot, actuator=actuator)
+        return led if self.replay is None else self.replay.robot(led)
+
+    def _kept(self, name: str, prior: float) -> str:
+        """What the robot file gets where the goals do not identify ``name`` (prior, 1/s)."""
+        if self.replay is not None and name == NAMES[1]:
+            return "the replay below decides"
+        return f"the prior's {prior:.4g} kept"
 
     def _entries(self) -> list[tuple[int, str, float, float, float, str]]:
         """(joint, name, estimate, error, prior, reason) of each joint's Kp and ωv."""
@@ -213,22 +227,27 @@ class LoopEstimate:
         for joint, name, value, error, prior, why in self._entries():
             lines.append(f"#   theta{joint + 1} {name}: {value:.4g} +- {error:.2g} [{prior:.4g}]")
             if why:
-                lines.append(f"#     not identifiable from this log ({why}): the prior's kept")
-        return lines
+                kept = self._kept(name, prior)
+                lines.append(f"#     not identifiable from this log ({why}): {kept}")
+        return lines + ([] if self.replay is None else self.replay.comment_lines())
 
     def summary(self) -> str:
         """One line on what the robot file gets: each value, or the prior's and why."""
         parts = []
         for joint, name, value, _, prior, why in self._entries():
+            if self.replay is not None and name == NAMES[1]:
+                continue
             kept = f"{prior:.4g} (prior; not identifiable: {why})" if why else f"{value:.4g}"
             parts.append(f"theta{joint + 1} {name} {kept}")
-        return "actuator loops (1/s): " + "; ".join(parts)
+        line = "actuator loops (1/s): " + "; ".join(parts)
+        return line if self.replay is None else f"{line}; {self.replay.summary()}"
 
     def markdown(
         self, prior_rms_rad: np.ndarray, identified_rms_rad: np.ndarray, on: str
     ) -> list[str]:
         """The report's section on the loops, with the goal prediction on ``on`` by the
         prior's and the identified loops (RMS, rad)."""
+        bandwidth_carried = self.bandwidth_carried if self.replay is None else self.replay.carried
         rows = [
             [
                 f"θ{joint + 1}",
@@ -242,7 +261,7 @@ class LoopEstimate:
                     label
                     for label, carried in (
                         ("Kp", self.gain_carried[joint]),
-                        ("ωv", self.bandwidth_carried[joint]),
+                        ("ωv", bandwidth_carried[joint]),
                     )
                     if carried
                 )
@@ -261,8 +280,8 @@ class LoopEstimate:
             "in the robot file",
         ]
         reasons = [
-            f"- θ{joint + 1} `{name}`: not identifiable from this log ({why}); the prior's "
-            f"{prior:.4g} kept."
+            f"- θ{joint + 1} `{name}`: not identifiable from this log ({why}); "
+            f"{self._kept(name, prior)}."
             for joint, name, _, _, prior, why in self._entries()
             if why
         ]
@@ -290,6 +309,7 @@ class LoopEstimate:
                     ["identified"] + [f"{1e3 * v:.4f}" for v in identified_rms_rad],
                 ],
             ),
+            *([] if self.replay is None else ["", *self.replay.markdown()]),
         ]
 
 

@@ -123,7 +123,8 @@ def spawn_emulator(
     else:
         command += ["--plant-robot", str(robot_file or DEFAULT_ROBOT)]
     command += ["--ids", ",".join(str(i) for i in ids)]
-    command += ["--start-deg", ",".join(repr(float(a)) for a in start_deg), "--seed", str(seed)]
+    # one token: a first angle below zero would read as an option of its own
+    command += ["--start-deg=" + ",".join(repr(float(a)) for a in start_deg), "--seed", str(seed)]
     for spec in (faults or Faults()).specs():
         command += ["--fault", spec]
     if trace_path is not None:
