@@ -36,13 +36,13 @@ import spm_opt as so
 from spm_opt.base.markdown import markdown_table
 from spm_opt.execution import ExecutionSettings
 from spm_opt.identify.robot_file import robot_file_text
-from spm_opt.judge.limits import contour_tube
+from spm_opt.judge.limits import ROBOT, RULES, contour_tube
 from spm_opt.model.params import MM
 from spm_opt.studies.identified_plants import identify_plant
 from spm_opt.verify.compensation import compensate
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.plant_family import PlantFamily
-from spm_opt.verify.predicted_cut import highest_feed_inside, predict_cut
+from spm_opt.verify.predicted_cut import PredictedCut, highest_feed_inside, predict_cut
 
 ROOT = Path(__file__).resolve().parents[1]
 IDENTIFICATION = ROOT / "problems" / "identification.toml"
@@ -93,7 +93,15 @@ def true_run(
         "outcome": result.reason,
         "true_mm": true.max_contour_deviation_mm,
         "true_broken": sorted({v.rule for v in true.violations}),
+        "true_worst": {v.limit: [v.worst, v.allowed] for v in true.violations},
+        "peak_joint_speed_rad_s": max(true.peak_joint_speed_rad_s),
+        "joint_speed_limit_rad_s": true.joint_speed_limit_rad_s,
     }
+
+
+def robot_rules_broken(predicted: PredictedCut) -> list[str]:
+    """The robot's rules the predicted run breaks, by name."""
+    return sorted({v.rule for v in predicted.broken_limits})
 
 
 def main() -> None:
@@ -173,7 +181,12 @@ def main() -> None:
                         run = true_run(
                             problem, plan, plant, work, f"{name}-feed", ExecutionSettings(feed=feed)
                         )
-                        slower = {"feed": feed, "predicted_mm": at_feed.deviation_mm, "run": run}
+                        slower = {
+                            "feed": feed,
+                            "predicted_mm": at_feed.deviation_mm,
+                            "predicted_broken": robot_rules_broken(at_feed),
+                            "run": run,
+                        }
                 row = {
                     "plant": index + 1,
                     "flap": flap,
@@ -183,12 +196,14 @@ def main() -> None:
                     "planned_mm": so.evaluate(problem, plan).max_contour_deviation_mm,
                     "predicted_lead_mm": predicted.deviation_mm,
                     "predicted_lead_inside": predicted.inside,
+                    "predicted_lead_broken": robot_rules_broken(predicted),
                     "lead": lead,
                     "iterations_mm": [i.deviation_mm for i in compensation.iterations],
                     "corrections": compensation.kept,
                     "scale": compensation.plan.metadata["compensation"]["scale"],
                     "predicted_compensated_mm": kept.deviation_mm,
                     "predicted_compensated_inside": kept.inside,
+                    "predicted_compensated_broken": robot_rules_broken(kept),
                     "compensated": compensated,
                     "highest_feed": slower,
                     "compensation_compute_s": compute_s,
@@ -210,24 +225,59 @@ def main() -> None:
         write_tables(args, rows)
 
 
-def lab_run(row: dict) -> tuple[float | None, dict | None, float | None]:
+def lab_run(row: dict) -> tuple[float | None, dict | None, float | None, list[str]]:
     """The run a lab makes after the prediction: the compensated stream where its predicted
     cut is inside, else the lead plan at the highest feed predicted inside. Returns (the
-    feed, the run, its predicted cut, mm); the run None where no feed is predicted inside."""
+    feed, the run, its predicted cut (mm), the robot's rules its prediction breaks); the
+    run None where no feed is predicted inside."""
     if row["predicted_compensated_inside"]:
-        return 1.0, row["compensated"], row["predicted_compensated_mm"]
+        return (
+            1.0,
+            row["compensated"],
+            row["predicted_compensated_mm"],
+            row["predicted_compensated_broken"],
+        )
     slower = row["highest_feed"]
     if slower is None:
-        return None, None, None
-    return slower["feed"], slower["run"], slower["predicted_mm"]
+        return None, None, None, []
+    return slower["feed"], slower["run"], slower["predicted_mm"], slower["predicted_broken"]
+
+
+def limit_lines(rows: list[dict]) -> list[str]:
+    """What the lab's true runs of one speed do to the robot's limits, and whether their
+    predictions said so, a line each."""
+    runs = [(run, predicted) for _, run, _, predicted in map(lab_run, rows) if run]
+    robot_rules = {name for name, rule in RULES.items() if rule.judges == ROBOT}
+    breaking = foreseen = extra = 0
+    for run, predicted in runs:
+        broken = set(run["true_broken"]) & robot_rules
+        breaking += bool(broken)
+        foreseen += bool(broken) and broken <= set(predicted)
+        extra += bool(set(predicted) - broken)
+    speed = max(run["peak_joint_speed_rad_s"] / run["joint_speed_limit_rad_s"] for run, _ in runs)
+    jerks = [
+        worst
+        for run, _ in runs
+        for limit, (worst, _) in run["true_worst"].items()
+        if limit.endswith(" jerk")
+    ]
+    jerk = f"worst {max(jerks):.3g} rad/s³" if jerks else "none broken"
+    return [
+        f"- Robot limits on the lab's true runs: joint speed at most {speed:.1%} of its limit; "
+        f"joint jerk {jerk}. Of the {breaking} that broke a robot limit, the prediction "
+        f"named every limit broken on {foreseen}; it named a limit the true run kept on "
+        f"{extra} of {len(runs)}."
+    ]
 
 
 def summary_lines(rows: list[dict]) -> list[str]:
     """What the rows of one speed say, a line each."""
-    runs = [lab_run(r) for r in rows]
+    runs = [lab_run(r)[:3] for r in rows]
     errors = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
     errors += [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
-    errors += [abs(predicted - run["true_mm"]) for _, run, predicted in runs if run]
+    errors += [  # the lab's run, where it is not the compensated run counted above
+        abs(predicted - run["true_mm"]) for feed, run, predicted in runs if run and feed != 1.0
+    ]
     inside = [
         run is not None and run["completed"] and run["true_mm"] <= r["tube_mm"]
         for r, (_, run, _) in zip(rows, runs, strict=True)
@@ -262,23 +312,25 @@ def summary_lines(rows: list[dict]) -> list[str]:
         "- Rules the lab's true runs break: "
         + (", ".join(f"{rule} on {n}" for rule, n in sorted(broken.items())) or "none")
         + ".",
+        *limit_lines(rows),
         f"- Compensation's compute: median {np.median(compute):.0f} s, at most "
         f"{max(compute):.0f} s a plan; the compensated plans are as long as their plans.",
     ]
 
 
 def runs_by_speed(rows: list[dict]) -> str:
-    """'plants 1–10 at 4 mm/s, plants 1–3 at 3 and 5 mm/s' of the rows."""
-    plants: dict[float, set[int]] = {}
+    """'plants 1–10 at 4 mm/s in a 0.12 mm tube, plants 1–3 at 3 and 5 mm/s in a 0.1 mm
+    tube' of the rows."""
+    plants: dict[tuple[float, float], set[int]] = {}
     for r in rows:
-        plants.setdefault(r["speed_mm_s"], set()).add(r["plant"])
-    by_plants: dict[str, list[float]] = {}
-    for speed, numbers in sorted(plants.items()):
+        plants.setdefault((r["speed_mm_s"], r["tube_mm"]), set()).add(r["plant"])
+    grouped: dict[tuple[str, float], list[float]] = {}
+    for (speed, tube), numbers in sorted(plants.items()):
         span = f"{min(numbers)}–{max(numbers)}" if len(numbers) > 1 else f"{min(numbers)}"
-        by_plants.setdefault(f"plants {span}", []).append(speed)
+        grouped.setdefault((f"plants {span}", tube), []).append(speed)
     return ", ".join(
-        f"{label} at {' and '.join(f'{v:g}' for v in speeds)} mm/s"
-        for label, speeds in by_plants.items()
+        f"{label} at {' and '.join(f'{v:g}' for v in speeds)} mm/s in a {tube:g} mm tube"
+        for (label, tube), speeds in grouped.items()
     )
 
 
@@ -297,11 +349,12 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         "highest feed predicted inside: predicted / true, mm",
         "completed",
         "broken on the lab's true run",
+        "robot limits its prediction breaks",
     ]
 
     def cells(r: dict) -> list[str]:
         slower = r["highest_feed"]
-        feed, run, _ = lab_run(r)
+        feed, run, _, predicted = lab_run(r)
         return [
             str(r["plant"]),
             r["flap"].removeprefix("craniotomy_"),
@@ -324,6 +377,7 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
                 for run_ in (r["lead"], r["compensated"], *([run] if feed != 1.0 and run else []))
             ),
             ", ".join(run["true_broken"]) if run else "(not run)",
+            ", ".join(predicted) if run else "",
         ]
 
     sections = []
@@ -341,7 +395,7 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         "# The compensated cut on a family of plants\n\n"
         f"`python experiments/compensated_cut.py --out {args.out} --plants N "
         f"--planners {args.planners} --flaps {args.flaps} --speed-mm-s S "
-        f"--tube-mm {args.tube_mm:g} --iterations {args.iterations} --part k/n` for each "
+        f"--tube-mm T --iterations {args.iterations} --part k/n` for each "
         f"part k of n (the runs below: {runs_by_speed(rows)}), then the same with `--merge`. "
         "Each plant identified from its own "
         f"{args.fit_seconds:g} s excitation (its velocity loops from the log's replay); the "
@@ -400,10 +454,10 @@ def figure(rows: list[dict]) -> Figure:
         right.scatter([], [], c=colour, label=planner)
     for flap, marker in markers.items():
         right.scatter([], [], c="0.5", marker=marker, label=flap.removeprefix("craniotomy_"))
-    tube = rows[0]["tube_mm"]
     right.plot([0, top], [0, top], color="0.5", lw=1)
-    right.axhline(tube, color="k", ls="--", lw=1, label=f"tube {tube:g} mm")
-    right.axvline(tube, color="k", ls="--", lw=1)
+    for tube, style in zip(sorted({r["tube_mm"] for r in rows}), ("--", ":", "-."), strict=False):
+        right.axhline(tube, color="k", ls=style, lw=1, label=f"tube {tube:g} mm")
+        right.axvline(tube, color="k", ls=style, lw=1)
     right.set(
         xlabel="true cut, lead alone (mm)",
         ylabel="true cut, compensated (mm)",

@@ -6,12 +6,13 @@
 For ``craniotomy_hardware.toml`` and the paper's ``craniotomy_bone_flap.toml``, each
 planner's plan runs on a robot that is not the planning model (the plant is
 ``problems/robots/prototype_plant.toml``: heavier, with drive friction, rotor inertia and
-encoder offsets; on the paper's problem also with its offsets at zero), once with goals
+encoder offsets; and the same with its offsets at zero), once with goals
 equal to the plan (``--tracking none``) and once led by the loops' lag (``lead``). Each run
 is judged by the evaluator on its log and on the plant's true state
 (:func:`spm_opt.verify.executed_cut.evaluate_log`): did it complete, how far the joints
 were from the plan (the true tracking error) and how far the true cut was from the
-contour. Beside each run, the cut predicted before it
+contour, and which robot limits (joint speed, acceleration, jerk, torque, current) the
+true run broke. Beside each run, the cut and the broken robot limits predicted before it
 (:func:`spm_opt.verify.predicted_cut.predict_cut`) with the plant's own file as the model:
 its loops are the file's (the default ωv of 150 1/s), while the plant runs the control
 table's default gains (ωv 87 and 116 1/s on that plant). ``--model ROBOT`` predicts on
@@ -42,7 +43,8 @@ from matplotlib.figure import Figure
 import spm_opt as so
 from spm_opt.base.markdown import markdown_table
 from spm_opt.execution.backend import Backend
-from spm_opt.judge.limits import contour_tube
+from spm_opt.judge.limits import ROBOT, RULES, contour_tube
+from spm_opt.judge.report import Violation
 from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.planner_style import labelled_handles
 from spm_opt.verify.executed_cut import evaluate_log
@@ -75,13 +77,14 @@ class Row:
     predicted_deviation_mm: float
     tube_mm: float | None
     violations: int
+    true_broken_limits: list[str]
+    predicted_broken_limits: list[str]
 
 
 def _plants(problem_name: str) -> Iterator[tuple[str, Robot]]:
     plant = so.load_robot(PLANT)
     yield "prototype_plant", plant
-    if problem_name == "craniotomy_bone_flap":
-        yield "offsets at zero", dataclasses.replace(plant, encoder_offset=np.zeros(2))
+    yield "offsets at zero", dataclasses.replace(plant, encoder_offset=np.zeros(2))
 
 
 @contextmanager
@@ -140,7 +143,14 @@ def run_one(
         predicted_deviation_mm=predicted.deviation_mm,
         tube_mm=None if tube is None else tube / MM,
         violations=len(true.violations),
+        true_broken_limits=_robot_limits(true.violations),
+        predicted_broken_limits=[v.limit for v in predicted.broken_limits],
     )
+
+
+def _robot_limits(violations: list[Violation]) -> list[str]:
+    """The robot's limits among ``violations`` ("theta2 jerk"), in the judge's order."""
+    return [v.limit for v in violations if RULES[v.rule].judges == ROBOT]
 
 
 def run(
@@ -195,6 +205,8 @@ def table(rows: list[Row]) -> str:
                 f"{lead.predicted_deviation_mm:.3f}",
                 f"{lead.predicted_deviation_mm - lead.true_deviation_mm:+.3f}",
                 "—" if lead.tube_mm is None else f"{lead.tube_mm:g}",
+                ", ".join(lead.true_broken_limits) or "none",
+                ", ".join(lead.predicted_broken_limits) or "none",
             )
         )
     header = (
@@ -211,6 +223,8 @@ def table(rows: list[Row]) -> str:
         "predicted, lead (mm)",
         "predicted less true, lead (mm)",
         "tube (mm)",
+        "robot limits broken, true (lead)",
+        "robot limits broken, predicted (lead)",
     )
     return "\n".join(markdown_table(header, lines))
 

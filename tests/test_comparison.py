@@ -180,7 +180,9 @@ def test_every_experiment_script_runs(tmp_path, command):
         }
         assert (tmp_path / "executed_cut.png").is_file()
     if command[0] == "executed_cut.py":
-        none, lead = json.loads((tmp_path / "executed_cut.json").read_text())
+        rows = json.loads((tmp_path / "executed_cut.json").read_text())
+        assert [r["plant"] for r in rows] == ["prototype_plant"] * 2 + ["offsets at zero"] * 2
+        none, lead = rows[:2]
         assert lead["completed"] and lead["tracking"] == "lead" and none["tracking"] == "none"
         assert lead["true_tracking_error_deg"] < 0.2 * none["true_tracking_error_deg"]
         assert (tmp_path / "executed_cut.png").is_file()

@@ -539,6 +539,8 @@ def test_the_executed_cut_experiment_shows_the_cut_too(tmp_path: Path) -> None:
             predicted_deviation_mm=0.085,
             tube_mm=tube,
             violations=0,
+            true_broken_limits=["theta2 jerk"],
+            predicted_broken_limits=["theta2 jerk"],
         )
         for problem, tube in (("hardware", None), ("bone_flap", 0.1))
         for planner in ("toppra", "ocp-min-time")

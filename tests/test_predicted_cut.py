@@ -1,6 +1,7 @@
 """The predicted cut: a plan run through the closed-loop model of a robot file before the
 robot moves, judged as a run's true cut; ``spm-opt execute`` refuses a plan whose predicted
-cut leaves the tube, unless told to warn."""
+cut leaves the tube, unless told to warn, and says which robot limit its predicted run
+breaks, or refuses it when told to."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from test_bad_inputs import assert_one_error, run_cli
 
 import spm_opt as so
 from spm_opt.execution import Executor, SimulatedRobot
+from spm_opt.judge.limits import ROBOT, RULES
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.predicted_cut import FEED_RESOLUTION, highest_feed_inside, predict_cut
 
@@ -47,6 +49,31 @@ def test_the_prediction_holds_the_true_cut_of_a_plant_whose_loops_it_does_not_kn
     assert predicted.deviation_mm > 0.05  # the plant's offsets and friction: far from 0
     assert predicted.inside and "inside the 0.1 mm tube" in predicted.summary()
     assert predicted.farthest_at.startswith("the cut from A")
+
+
+def test_the_prediction_names_the_robot_limits_the_true_run_breaks(flap_plan, tmp_path):
+    """toppra's plan of the paper's flap, on prototype_plant.toml running its own loops: the
+    plant sticks where a joint comes to rest and breaks away after it, which breaks the
+    joint acceleration and jerk limits that the plan keeps (measured: theta2 jerk 30.1
+    rad/s³ true, 23.6 predicted, both at t = 21.00 s). The prediction names the same robot
+    limits, with each worst within 0.1 s of the true one's."""
+    problem, plan = flap_plan
+    plant = so.load_robot(PLANT)
+    assert not so.evaluate(problem, plan).violations
+    predicted = predict_cut(problem, plan, plant)
+    backend = SimulatedRobot(problem.robot, start_rad=plan.position(0.0), plant_robot=plant)
+    Executor(problem, backend).run(plan, tmp_path / "run.csv")
+    backend.trace.save(tmp_path / "trace.npz")
+    true = evaluate_log(problem, tmp_path / "run.csv", tmp_path / "trace.npz").true
+    robot_rules = {name for name, rule in RULES.items() if rule.judges == ROBOT}
+    true_broken = {v.limit: v for v in true.violations if v.rule in robot_rules}
+    assert {"joint jerk", "joint acceleration"} <= {v.rule for v in true_broken.values()}
+    assert {v.limit for v in predicted.broken_limits} == set(true_broken)
+    for violation in predicted.broken_limits:
+        assert abs(violation.time_s - true_broken[violation.limit].time_s) <= 0.1
+    worst = predicted.broken_limits[0]
+    assert worst.worst / worst.allowed >= max(v.worst / v.allowed for v in predicted.broken_limits)
+    assert predicted.limits_line().startswith(f"predicted run on prototype_plant breaks {worst}")
 
 
 def tight_problem(tmp_path: Path) -> Path:
@@ -86,6 +113,30 @@ def test_execute_refuses_a_plan_whose_predicted_cut_leaves_the_tube_unless_told_
     assert report["max_contour_deviation_mm"] > 0.05
     assert "outside the 0.05 mm tube" in report["summary"]
     assert any(v["rule"] == "contour deviation" for v in report["violations"])
+
+
+def test_execute_says_which_robot_limit_the_predicted_run_breaks_and_refuses_when_told(
+    flap_plan, tmp_path, capsys
+):
+    """The paper's flap on its own model: toppra's plan is predicted inside the tube, and
+    its predicted run breaks the joint jerk limit where the joints stick and break away."""
+    plan = tmp_path / "plans" / "plan.csv"
+    plan.parent.mkdir()
+    flap_plan[1].to_csv(plan)
+    log = tmp_path / "logs" / "run.csv"
+    command = ["execute", str(plan), "--problem", str(FLAP), "--backend", "sim"]
+    command += ["--log", str(log)]
+    status, shown = run_cli([*command, "--predicted-limits", "refuse"])
+    expected = ("plan refused: predicted run on prototype breaks theta", "jerk")
+    assert_one_error(status, capsys.readouterr().err, expected, tmp_path, shown)
+    assert not log.parent.exists() or not any(log.parent.iterdir())
+
+    status, _ = run_cli(command)
+    assert status == 0
+    said = capsys.readouterr().err
+    assert "predicted run on prototype breaks theta" in said
+    assert "run all the same (--predicted-limits refuse refuses it)" in said
+    assert log.exists()
 
 
 @pytest.mark.slow

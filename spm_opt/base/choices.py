@@ -29,6 +29,7 @@ TRACKING_MODES = ("lead", "none")
 DEFAULT_MAX_TASKS = 100_000
 """Most tasks a sweep may have unless its caller allows more (``max_tasks``): the shipped
 sweeps have 24 to 1,200; at seconds to minutes a task, 100,000 take days on a cluster."""
-PREDICTED_OUTSIDE = ("refuse", "warn")
-"""What ``spm-opt execute`` does with a plan whose predicted cut leaves the tube
-(:mod:`spm_opt.verify.predicted_cut`): refuse the run, or say so and run it."""
+PREDICTION_ACTIONS = ("refuse", "warn")
+"""What ``spm-opt execute`` does with a plan whose predicted cut leaves the tube, or whose
+predicted run breaks a robot limit (:mod:`spm_opt.verify.predicted_cut`): refuse the run,
+or say so and run it."""

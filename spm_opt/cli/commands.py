@@ -71,7 +71,7 @@ def _execute(args: argparse.Namespace) -> None:
         check_output_file(args.trace, "--trace")
     problem = load_problem(args.problem)
     trajectory = Trajectory.from_csv(args.plan)
-    _check_predicted_cut(problem, trajectory, settings, args.predicted_outside)
+    _check_predicted_cut(problem, trajectory, settings, args)
     keys = _keys_terminal(args.interactive)
     if args.backend == "sim":
         start = trajectory.position(trajectory.start_time)
@@ -107,29 +107,36 @@ def _execute(args: argparse.Namespace) -> None:
 
 
 def _check_predicted_cut(
-    problem: Problem, trajectory: Trajectory, settings: ExecutionSettings, outside: str
+    problem: Problem, trajectory: Trajectory, settings: ExecutionSettings, args: argparse.Namespace
 ) -> None:
-    """Pre-flight's prediction: with a contour tolerance, run ``trajectory`` through the
-    closed-loop model of the problem's robot; a predicted cut outside the tube (or a
-    predicted run that does not complete) refuses the run, or with ``outside`` "warn" is
-    said and run."""
+    """Pre-flight's prediction: run ``trajectory`` through the closed-loop model of the
+    problem's robot. A predicted cut outside the tube (with a contour tolerance) or a
+    predicted run that does not complete refuses the run, or with
+    ``--predicted-outside warn`` is said and run; a robot limit the predicted run breaks is
+    said, or with ``--predicted-limits refuse`` refuses it."""
     from spm_opt.base.errors import PreflightError
-    from spm_opt.judge.limits import contour_tube
     from spm_opt.verify.predicted_cut import predict_cut
 
-    if contour_tube(problem, executed=True) is None or trajectory.metadata.get("ignores_contour"):
+    if trajectory.metadata.get("ignores_contour"):
         return
-    _LOG.info("pre-flight: predicting the cut on the closed-loop model of %s", problem.robot.name)
+    _LOG.info("pre-flight: predicting the run on the closed-loop model of %s", problem.robot.name)
     predicted = predict_cut(problem, trajectory, settings=settings)
     if predicted.inside:
         _LOG.info("pre-flight: %s", predicted.summary())
-    elif outside == "warn":
+    elif args.predicted_outside == "warn":
         _LOG.warning("%s; run all the same (--predicted-outside warn)", predicted.summary())
     else:
         raise PreflightError(
             f"plan refused: {predicted.summary()} (spm-opt predict --highest-feed finds the "
             "highest feed that keeps it inside; --predicted-outside warn runs it all the same)"
         )
+    limits = predicted.limits_line()
+    if limits and args.predicted_limits == "refuse":
+        raise PreflightError(
+            f"plan refused: {limits} (--predicted-limits warn runs it all the same)"
+        )
+    if limits:
+        _LOG.warning("%s; run all the same (--predicted-limits refuse refuses it)", limits)
 
 
 def _predict(args: argparse.Namespace) -> None:
@@ -147,9 +154,12 @@ def _predict(args: argparse.Namespace) -> None:
     else:
         predicted = predict_cut(problem, trajectory, robot, settings)
     if args.json:
-        print(json.dumps({"summary": predicted.summary(), **predicted.report.to_dict()}, indent=2))
+        summary = {"summary": predicted.summary(), "limits": predicted.limits_line()}
+        print(json.dumps(summary | predicted.report.to_dict(), indent=2))
     else:
-        print(f"{predicted.summary()}\n\n{predicted.report.to_markdown()}", end="")
+        limits = predicted.limits_line()
+        headline = predicted.summary() + (f"\n{limits}" if limits else "")
+        print(f"{headline}\n\n{predicted.report.to_markdown()}", end="")
     fault = _faults("predicted", predicted.report)
     if fault or not predicted.inside:
         raise GateFailed(fault or predicted.summary())

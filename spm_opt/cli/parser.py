@@ -14,7 +14,7 @@ from spm_opt.base.choices import (
     CONTOUR_PLANNER_NAMES,
     DEFAULT_MAX_TASKS,
     PLANNER_NAMES,
-    PREDICTED_OUTSIDE,
+    PREDICTION_ACTIONS,
     TRACKING_MODES,
 )
 from spm_opt.base.version import package_version
@@ -460,12 +460,21 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
     _feed(execute)
     execute.add_argument(
         "--predicted-outside",
-        choices=PREDICTED_OUTSIDE,
+        choices=PREDICTION_ACTIONS,
         default="refuse",
-        help="with a contour tolerance, the plan first runs through the closed-loop model "
-        "of the problem's robot (spm-opt predict): refuse: a predicted cut outside the tube, "
-        "or a predicted run that does not complete, refuses the run; warn: says so and runs "
-        "(default refuse)",
+        help="the plan first runs through the closed-loop model of the problem's robot "
+        "(spm-opt predict): refuse: with a contour tolerance, a predicted cut outside the "
+        "tube, or a predicted run that does not complete, refuses the run; warn: says so "
+        "and runs (default refuse)",
+    )
+    execute.add_argument(
+        "--predicted-limits",
+        choices=PREDICTION_ACTIONS,
+        default="warn",
+        help="warn: a predicted run that breaks a robot limit (joint speed, acceleration, "
+        "jerk, torque, current) is said on stderr and run; refuse: refuses the run "
+        "(default warn: the stick-slip of the robot's friction breaks the jerk limit at "
+        "the stops of time-optimal plans)",
     )
     execute.add_argument(
         "--max-hold",

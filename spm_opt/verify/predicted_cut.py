@@ -8,8 +8,10 @@ loops (Kp and ωv, as the control table's whole gains give them:
 their Velocity and Torque Limits, and the sensors' resolution. The executor drives it with
 the run's settings (rate, lead, starting feed) on a virtual clock, from the plan's start,
 and :func:`~spm_opt.verify.executed_cut.evaluate_log` judges the plant's true state against
-the whole contour tolerance, as it judges a run's trace. A robot file identified from the
-robot's own logs (``spm-opt identify``) makes the model that robot.
+the whole contour tolerance, as it judges a run's trace, and by the robot's limits
+(:attr:`PredictedCut.broken_limits`: where a joint sticks on its friction and breaks away,
+the run breaks acceleration and jerk limits its plan keeps). A robot file identified from
+the robot's own logs (``spm-opt identify``) makes the model that robot.
 
 What the model cannot know, the prediction does not hold: feed changes made during the run,
 a plant that differs from the file, the stick-slip's scatter from run to run.
@@ -31,7 +33,8 @@ from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
 from spm_opt.execution.feed import FEED_STEP
 from spm_opt.execution.log import read_execution_log
 from spm_opt.execution.plant import PlantSettings, gains_for_rates
-from spm_opt.judge.limits import contour_tube
+from spm_opt.judge.limits import ROBOT, RULES, contour_tube
+from spm_opt.judge.report import Violation
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM, Robot
 from spm_opt.problem.problem import Problem
@@ -82,6 +85,23 @@ class PredictedCut:
         """Whether the predicted run completes and the judge finds its cut in the tube."""
         broken = {violation.rule for violation in self.report.violations}
         return self.report.completed and "contour deviation" not in broken
+
+    @property
+    def broken_limits(self) -> list[Violation]:
+        """The robot's limits the predicted run breaks (the rules that judge the robot:
+        joint range, speed, acceleration, jerk, torque, current, singularity), the worst
+        against its limit first."""
+        broken = [v for v in self.report.violations if RULES[v.rule].judges == ROBOT]
+        return sorted(broken, key=lambda v: -abs(v.worst) / max(abs(v.allowed), 1e-12))
+
+    def limits_line(self) -> str:
+        """One line: the robot's limit the predicted run breaks worst and how many more, or
+        "" if it breaks none."""
+        broken = self.broken_limits
+        if not broken:
+            return ""
+        more = f", and {len(broken) - 1} more" if len(broken) > 1 else ""
+        return f"predicted run on {self.robot} breaks {broken[0]}{more}"
 
     def summary(self) -> str:
         """One line: the predicted distance, where, against the tube."""
