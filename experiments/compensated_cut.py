@@ -36,7 +36,7 @@ import spm_opt as so
 from spm_opt.base.markdown import markdown_table
 from spm_opt.execution import ExecutionSettings
 from spm_opt.identify.robot_file import robot_file_text
-from spm_opt.judge.limits import ROBOT, RULES, contour_tube
+from spm_opt.judge.limits import ROBOT_RULES, contour_tube
 from spm_opt.model.params import MM
 from spm_opt.studies.identified_plants import identify_plant
 from spm_opt.verify.compensation import compensate
@@ -247,10 +247,9 @@ def limit_lines(rows: list[dict]) -> list[str]:
     """What the lab's true runs of one speed do to the robot's limits, and whether their
     predictions said so, a line each."""
     runs = [(run, predicted) for _, run, _, predicted in map(lab_run, rows) if run]
-    robot_rules = {name for name, rule in RULES.items() if rule.judges == ROBOT}
     breaking = foreseen = extra = 0
     for run, predicted in runs:
-        broken = set(run["true_broken"]) & robot_rules
+        broken = set(run["true_broken"]) & ROBOT_RULES
         breaking += bool(broken)
         foreseen += bool(broken) and broken <= set(predicted)
         extra += bool(set(predicted) - broken)

@@ -43,7 +43,7 @@ from matplotlib.figure import Figure
 import spm_opt as so
 from spm_opt.base.markdown import markdown_table
 from spm_opt.execution.backend import Backend
-from spm_opt.judge.limits import ROBOT, RULES, contour_tube
+from spm_opt.judge.limits import ROBOT_RULES, contour_tube
 from spm_opt.judge.report import Violation
 from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.planner_style import labelled_handles
@@ -150,7 +150,7 @@ def run_one(
 
 def _robot_limits(violations: list[Violation]) -> list[str]:
     """The robot's limits among ``violations`` ("theta2 jerk"), in the judge's order."""
-    return [v.limit for v in violations if RULES[v.rule].judges == ROBOT]
+    return [v.limit for v in violations if v.rule in ROBOT_RULES]
 
 
 def run(

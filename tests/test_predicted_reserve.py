@@ -11,8 +11,8 @@ import pytest
 from test_bad_inputs import run_cli
 
 import spm_opt as so
+from spm_opt.execution.plant import closed_loop_settings
 from spm_opt.verify.executed_cut import evaluate_log
-from spm_opt.verify.predicted_cut import closed_loop_settings
 
 ROOT = Path(__file__).resolve().parents[1]
 FIVE = ROOT / "problems" / "craniotomy_five_landmarks.toml"

@@ -46,7 +46,7 @@ import bisect
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -127,6 +127,16 @@ def gains_for_rates(
         for wv, m in zip(bandwidth_per_s, inertia, strict=True)
     ]
     return (position[0], position[1]), (velocity[0], velocity[1])
+
+
+def closed_loop_settings(robot: Robot) -> PlantSettings:
+    """The simulated plant's settings whose loops are ``robot``'s file's (Kp, ωv)."""
+    base = PlantSettings()
+    actuator = robot.actuator
+    position, velocity = gains_for_rates(
+        robot, base, actuator.position_loop_gain_per_s, actuator.velocity_loop_bandwidth_per_s
+    )
+    return replace(base, position_p_gain=position, velocity_p_gain=velocity)
 
 
 def _joint_inertia(robot: Robot) -> np.ndarray:

@@ -52,7 +52,7 @@ from spm_opt.execution.feed import JointLimits
 from spm_opt.execution.log import bytes_needed
 from spm_opt.execution.tracking import Lead, led_goals_outside
 from spm_opt.judge.evaluate import evaluate
-from spm_opt.judge.limits import ROBOT, RULES
+from spm_opt.judge.limits import ROBOT_RULES, RULES
 from spm_opt.model.params import DEG
 from spm_opt.problem import provenance
 from spm_opt.problem.problem import Problem
@@ -90,7 +90,7 @@ def check_plan(
     )
     check_at_rest(trajectory, limits, period_s)
     report = evaluate(problem, trajectory)
-    broken = [v for v in report.violations if RULES[v.rule].judges == ROBOT]
+    broken = [v for v in report.violations if v.rule in ROBOT_RULES]
     if broken:
         raise PreflightError(
             f"plan refused: {broken[0]}"

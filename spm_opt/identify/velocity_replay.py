@@ -42,10 +42,9 @@ import numpy as np
 from spm_opt.base.errors import InputError
 from spm_opt.base.markdown import markdown_table
 from spm_opt.execution.log import read_execution_log
-from spm_opt.execution.plant import DynamixelPlant
+from spm_opt.execution.plant import DynamixelPlant, closed_loop_settings
 from spm_opt.identify.samples import check_log_rows, log_values
 from spm_opt.model.params import Robot
-from spm_opt.verify.predicted_cut import closed_loop_settings
 
 __all__ = [
     "DISTINCT",

@@ -117,6 +117,9 @@ RULES: dict[str, Rule] = {
 }
 """Every limit the evaluator checks, by name."""
 
+ROBOT_RULES = frozenset(name for name, rule in RULES.items() if rule.judges == ROBOT)
+"""The rules that judge the robot (the machine's safety), by name."""
+
 
 def tolerance_note() -> str:
     """One sentence for reports: the tolerance the evaluator allows."""

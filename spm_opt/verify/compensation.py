@@ -52,7 +52,7 @@ from spm_opt.base.errors import InputError
 from spm_opt.execution import ExecutionSettings
 from spm_opt.execution.log import read_execution_log
 from spm_opt.judge.evaluate import evaluate
-from spm_opt.judge.limits import ROBOT, RULES
+from spm_opt.judge.limits import ROBOT_RULES
 from spm_opt.model.params import Robot
 from spm_opt.problem.problem import Problem
 from spm_opt.problem.trajectory import Trajectory
@@ -169,7 +169,7 @@ def robot_limits_broken(problem: Problem, plan: Trajectory) -> list[str]:
     """The violations of the rules that judge the robot (joint range, speed, acceleration,
     jerk, torque, current, singularity) in ``plan``'s stream."""
     report = evaluate(problem, plan)
-    return [str(v) for v in report.violations if RULES[v.rule].judges == ROBOT]
+    return [str(v) for v in report.violations if v.rule in ROBOT_RULES]
 
 
 def compensate(

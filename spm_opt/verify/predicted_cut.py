@@ -32,8 +32,8 @@ from spm_opt.cut.cut_checks import stretch
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
 from spm_opt.execution.feed import FEED_STEP
 from spm_opt.execution.log import read_execution_log
-from spm_opt.execution.plant import PlantSettings, gains_for_rates
-from spm_opt.judge.limits import ROBOT, RULES, contour_tube
+from spm_opt.execution.plant import closed_loop_settings
+from spm_opt.judge.limits import ROBOT_RULES, contour_tube
 from spm_opt.judge.report import Violation
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM, Robot
@@ -91,7 +91,7 @@ class PredictedCut:
         """The robot's limits the predicted run breaks (the rules that judge the robot:
         joint range, speed, acceleration, jerk, torque, current, singularity), the worst
         against its limit first."""
-        broken = [v for v in self.report.violations if RULES[v.rule].judges == ROBOT]
+        broken = [v for v in self.report.violations if v.rule in ROBOT_RULES]
         return sorted(broken, key=lambda v: -abs(v.worst) / max(abs(v.allowed), 1e-12))
 
     def limits_line(self) -> str:
@@ -117,16 +117,6 @@ class PredictedCut:
             f"predicted cut on {self.robot}: {self.deviation_mm:.3f} mm from the contour at "
             f"its farthest{where}, {side} the {self.tube_mm:g} mm tube"
         )
-
-
-def closed_loop_settings(robot: Robot) -> PlantSettings:
-    """The simulated plant's settings whose loops are ``robot``'s file's (Kp, ωv)."""
-    base = PlantSettings()
-    actuator = robot.actuator
-    position, velocity = gains_for_rates(
-        robot, base, actuator.position_loop_gain_per_s, actuator.velocity_loop_bandwidth_per_s
-    )
-    return dataclasses.replace(base, position_p_gain=position, velocity_p_gain=velocity)
 
 
 def predict_cut(
