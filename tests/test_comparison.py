@@ -124,6 +124,7 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
             marks=[pytest.mark.slow, pytest.mark.xdist_group("real time")],
         ),
         ["compensated_cut.py", "--merge"],  # its tables from a part (the study: 25 min)
+        ["kinematic_calibration.py", "--robots", "3", "--skip-flap"],
     ],
     ids=lambda c: " ".join(c),
 )
@@ -139,6 +140,7 @@ def test_every_experiment_script_runs(tmp_path, command):
         "feed_hold.py",
         "executed_cut.py",
         "compensated_cut.py",
+        "kinematic_calibration.py",
     }
     assert {p.name for p in (ROOT / "experiments").glob("*.py")} == listed
     out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
@@ -160,6 +162,10 @@ def test_every_experiment_script_runs(tmp_path, command):
         rows = json.loads((tmp_path / "compensated_cut.json").read_text())
         assert len(rows) == 6 and "true cut inside" in (tmp_path / "compensated_cut.md").read_text()
         assert (tmp_path / "compensated_cut.png").is_file()
+    if command[0] == "kinematic_calibration.py":
+        study = json.loads((tmp_path / "kinematic_calibration.json").read_text())
+        assert study["robots"] == 3 and set(study["coverage_40_poses"]) >= {"encoder_zero_1"}
+        assert (tmp_path / "kinematic_calibration.png").is_file()
     if command[0] == "identification_coverage.py":
         rows = json.loads((tmp_path / "coverage.json").read_text())
         assert [row["sweep"] for row in rows] == [

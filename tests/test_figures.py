@@ -65,6 +65,10 @@ FIGURE_WRITERS = {
         "test_the_identification_figure_is_over_time_with_a_title",
     ),
     "experiments/feed_hold.py": ("test_figures.py", "test_the_feed_hold_figure_keeps_the_rules"),
+    "experiments/kinematic_calibration.py": (
+        "test_comparison.py",
+        "test_every_experiment_script_runs",
+    ),
     "experiments/executed_cut.py": (
         "test_figures.py",
         "test_the_executed_cut_experiment_shows_the_cut_too",

@@ -29,7 +29,7 @@ from unittest import mock
 import tomli_w
 
 from spm_opt.base.fields import KeyRecord, recording
-from spm_opt.model.params import load_robot
+from spm_opt.model.params import CALIBRATION_NUMBERS, CALIBRATION_STRINGS, load_robot
 from spm_opt.planners import PLANNERS
 from spm_opt.problem.problem import PLAUSIBLE_CONTOUR_TOLERANCE_MM as _TOLERANCE_MM
 from spm_opt.problem.problem import load_problem
@@ -53,9 +53,19 @@ samples = 2
 """
 """A sweep with a ``[random]`` table, so that its keys are read too."""
 
+CALIBRATION = {
+    "encoder_zero_deg": [0.05, -0.03],
+    **dict.fromkeys(CALIBRATION_STRINGS, "text"),
+    **dict.fromkeys(CALIBRATION_NUMBERS, 1.0),
+    "standard_error_deg": {"encoder_zero_1": 0.002},
+    "unidentified": [],
+}
+"""A ``[calibration]`` table with every key its reader takes."""
+
 OPEN_TABLES = {
     "problem": {"planner": "NAME"},
     "sweep": {"grid": "KEY", "random.ranges": "KEY"},
+    "robot": {"calibration.standard_error_deg": "PARAMETER"},
 }
 """Tables whose keys are names, not fixed keys: every key under them is shown as one."""
 
@@ -188,8 +198,41 @@ NOTES = {
     ("robot", "joints.theta2_range_deg"): "[lower, upper] of θ2, lower < upper.",
     ("robot", "joints.min_singularity_margin"): "Smallest allowed singularity margin (1 at "
     "θ = 0, 0 at a singularity).",
-    ("robot", "joints.encoder_offset_deg"): "What each encoder reads at θ = 0; only the "
-    "simulated robot applies it (a plant whose encoders are off).",
+    ("robot", "joints.encoder_offset_deg"): "What each encoder of the robot as built reads "
+    "at θ = 0; only the simulated robot applies it (a plant whose encoders are off). A "
+    "calibration writes the zeros it found here too.",
+    ("robot", "mechanism"): "The mechanism as built, for the simulated robot: its tool points "
+    "where these error angles say (0: the ideal robot). A calibration writes what it found.",
+    ("robot", "mechanism.axis_twist_deg"): "The lower actuator's axis turned about z from y "
+    "(the axes 90° + twist apart).",
+    ("robot", "mechanism.arc_tilt_deg"): "[upper, lower]: each arc's plane normal tilted "
+    "towards its actuator's axis.",
+    ("robot", "mechanism.tool_tilt_deg"): "[x, y]: the tool's axis turned about the upper "
+    "platform's x, then y, from the platform's radius.",
+    ("robot", "calibration"): "What `spm-opt calibrate` measured: the executor's goals and "
+    "readings go through it, so plans stay in the ideal model's joint coordinates. Absent: "
+    "the ideal robot.",
+    ("robot", "calibration.encoder_zero_deg"): "What each encoder reads at θ = 0.",
+    ("robot", "calibration.axis_twist_deg"): "As mechanism.axis_twist_deg, measured.",
+    ("robot", "calibration.arc_tilt_deg"): "As mechanism.arc_tilt_deg, measured.",
+    ("robot", "calibration.tool_tilt_deg"): "As mechanism.tool_tilt_deg, measured.",
+    ("robot", "calibration.date"): "When the calibration was fitted (UTC).",
+    ("robot", "calibration.data_sha256"): "SHA-256 of the log and tracker file it was fitted to.",
+    ("robot", "calibration.tracker"): "The tracker's file, or the simulated tracker's settings.",
+    ("robot", "calibration.method"): "How it was fitted.",
+    ("robot", "calibration.marker_distance_mm"): "The marker's fitted distance from the isocenter.",
+    ("robot", "calibration.poses"): "Poses fitted.",
+    ("robot", "calibration.held_out_poses"): "Poses never fitted, on which it was judged.",
+    ("robot", "calibration.residual_rms_mm"): "The fit's residual (FRE).",
+    ("robot", "calibration.held_out_rms_mm"): "The error at the held-out poses (TRE, "
+    "measured), the tracker's own error included.",
+    ("robot", "calibration.held_out_max_mm"): "The largest held-out error.",
+    ("robot", "calibration.predicted_tre_mm"): "Fitzpatrick's TRE of the rigid registration "
+    "from the fit's localisation error.",
+    ("robot", "calibration.condition_number"): "Of the fitted poses' scaled identification "
+    "Jacobian.",
+    ("robot", "calibration.standard_error_deg"): "Each identified error angle's standard error.",
+    ("robot", "calibration.unidentified"): "Error angles the poses could not separate (kept at 0).",
     ("robot", "payload"): "A tool carried by the upper platform.",
     ("robot", "payload.mass_kg"): "Its mass, a point mass.",
     ("robot", "payload.offset_mm"): "Its offset from B in the upper platform's frame.",
@@ -277,8 +320,8 @@ LOADERS: dict[str, Callable[[Path], Any]] = {
 
 def other_paths(folder: Path) -> dict[str, list[Path]]:
     """Files, written in ``folder``, that take the loaders' paths no shipped file takes: a
-    sweep with ``[random]``, a robot without a current map, and a problem whose skull's
-    transform is fitted to fiducials."""
+    sweep with ``[random]``, a robot without a current map, one with a ``[calibration]``,
+    and a problem whose skull's transform is fitted to fiducials."""
     sweep = folder / "random_axes.toml"
     sweep.write_text(RANDOM_SWEEP.format(problem=PAPER_PROBLEM.as_posix()), encoding="utf-8")
     robot = tomllib.loads(PROTOTYPE.read_text(encoding="utf-8"))
@@ -286,6 +329,9 @@ def other_paths(folder: Path) -> dict[str, list[Path]]:
         del robot["actuator"][key]
     datasheet_map = folder / "datasheet_map.toml"
     datasheet_map.write_text(tomli_w.dumps(robot), encoding="utf-8")
+    robot["calibration"] = CALIBRATION
+    calibrated = folder / "calibrated.toml"
+    calibrated.write_text(tomli_w.dumps(robot), encoding="utf-8")
     problem = tomllib.loads(PAPER_PROBLEM.read_text(encoding="utf-8"))
     problem["robot"] = PROTOTYPE.as_posix()
     fiducials = [[0.0, 0.0, 0.0], [50.0, 0.0, 0.0], [0.0, 40.0, 0.0], [0.0, 0.0, 30.0]]
@@ -295,7 +341,7 @@ def other_paths(folder: Path) -> dict[str, list[Path]]:
     }
     registered = folder / "registered.toml"
     registered.write_text(tomli_w.dumps(problem), encoding="utf-8")
-    return {"problem": [registered], "robot": [datasheet_map], "sweep": [sweep]}
+    return {"problem": [registered], "robot": [datasheet_map, calibrated], "sweep": [sweep]}
 
 
 def records_by_kind() -> dict[str, list[KeyRecord]]:

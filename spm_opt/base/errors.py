@@ -28,6 +28,7 @@ OPTIONAL: dict[str, tuple[str, str]] = {
     "threadpoolctl": ("threadpoolctl", "sweep"),
     "dynamixel_sdk": ("dynamixel-sdk", "hardware"),
     "serial": ("pyserial", "hardware"),
+    "sksurgerynditracker.nditracker": ("scikit-surgerynditracker", "hardware"),
     "mujoco": ("mujoco", "verify"),
     "trimesh": ("trimesh", "skull"),
     "plotly": ("plotly", "skull"),

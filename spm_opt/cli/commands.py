@@ -580,6 +580,114 @@ def _identify(args: argparse.Namespace) -> None:
         _LOG.warning(line)
 
 
+def _check_range(value: float, option: str, low: float, high: float) -> None:
+    if not low <= value <= high:
+        raise InputError(f"{option} {value:g}: allowed {low:g} to {high:g}")
+
+
+def _calibrate(args: argparse.Namespace) -> None:
+    import numpy as np
+
+    from spm_opt.base.files import write_atomically
+    from spm_opt.calibration.plan import calibration_plan
+    from spm_opt.calibration.report import report_markdown, residual_figure
+    from spm_opt.calibration.run import (
+        CalibrationSettings,
+        calibrate,
+        choose_poses,
+        logged_readings_raw,
+        measurements,
+    )
+    from spm_opt.calibration.simulate import simulated_run
+    from spm_opt.calibration.simulated_tracker import SimulatedTracker
+    from spm_opt.execution.log import read_execution_log
+    from spm_opt.model.params import load_robot, robot_toml
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.report.plots import to_png
+    from spm_opt.verify.motion_capture import read_capture_csv
+
+    _check_range(args.poses, "--poses", 6, 400)
+    _check_range(args.held_out, "--held-out", 1, 100)
+    _check_range(args.marker_distance_mm, "--marker-distance-mm", 50.0, 1000.0)
+    _check_range(args.tracker_fle_mm, "--tracker-fle-mm", 0.0, 5.0)
+    _check_range(args.tracker_bias_mm, "--tracker-bias-mm", 0.0, 5.0)
+    lab = args.log is not None or args.tracker is not None
+    if lab and (args.log is None or args.tracker is None):
+        raise InputError("--log and --tracker: give both (a lab's run), or neither (simulated)")
+    if lab and args.plant_robot is not None:
+        raise InputError("--plant-robot: only for a simulated calibration (without --log)")
+    if args.write_plan is None and args.out is None:
+        raise InputError("--out: required (the calibrated robot TOML), unless --write-plan")
+    if args.out is not None and args.out.suffix != ".toml":
+        raise InputError(f"--out {args.out}: expected a robot file name ending in .toml")
+    for option, path in (("--out", args.out), ("--write-plan", args.write_plan)):
+        if path is not None:
+            check_output_file(path, option)
+    problem = load_problem(args.problem)
+    settings = CalibrationSettings(
+        poses=args.poses,
+        held_out=args.held_out,
+        marker_distance_mm=args.marker_distance_mm,
+        seed=args.seed,
+    )
+    if args.write_plan is not None or not lab:
+        poses, held = choose_poses(problem.robot, settings)
+        plan = calibration_plan(problem, poses, held, settings.dwell_s, settings.settle_s)
+    if args.write_plan is not None:
+        if args.write_plan.suffix != ".csv":
+            raise InputError(f"--write-plan {args.write_plan}: expected a name ending in .csv")
+        plan.to_csv(args.write_plan)
+        print(args.write_plan)
+        return
+    if lab:
+        from spm_opt.calibration.tracker_files import read_tracker_file
+
+        table, header = read_execution_log(args.log)
+        track = read_tracker_file(args.tracker, body=args.body)
+        tracker = f"{args.tracker.name}"
+        data = args.log.read_bytes() + args.tracker.read_bytes()
+    else:
+        plant = problem.robot if args.plant_robot is None else load_robot(args.plant_robot)
+        simulated = SimulatedTracker(
+            marker_distance_mm=args.marker_distance_mm,
+            fle_mm=args.tracker_fle_mm,
+            bias_mm=args.tracker_bias_mm,
+            seed=args.seed,
+        )
+        log_path = args.out.with_name(f"{args.out.stem}_run.csv")
+        check_output_file(log_path, "--out")
+        _LOG.info("calibrate: running %d poses on the simulated %s", len(poses), plant.name)
+        table, header, text = simulated_run(problem, plan, plant, simulated, log_path)
+        tracker_path = args.out.with_name(f"{args.out.stem}_tracker.csv")
+        write_atomically({tracker_path: text})
+        track = read_capture_csv(tracker_path)
+        tracker = f"simulated (FLE {simulated.fle_mm:g} mm, bias {simulated.bias_mm:g} mm)"
+        data = log_path.read_bytes() + text.encode()
+    plan_record = header.get("plan", {}).get("calibration")
+    if plan_record is None:
+        raise InputError(f"log {args.log}: not a calibration run (its plan has no calibration)")
+    table = logged_readings_raw(table, header)
+    source = str(args.tracker or "tracker")
+    fitted, tested = measurements(table, plan_record, track, args.marker_distance_mm * 1e-3, source)
+    calibration = calibrate(fitted, tested, args.marker_distance_mm * 1e-3, tracker, data)
+    robot = calibration.calibrated(problem.robot)
+    files = {
+        args.out: robot_toml(robot, args.out.stem, f"{problem.robot.name}, calibrated"),
+        args.out.with_suffix(".md"): report_markdown(calibration, problem.robot.name),
+        args.out.with_suffix(".png"): to_png(residual_figure(calibration)),
+    }
+    write_atomically(files)
+    for path in files:
+        print(path)
+    zeros = np.degrees(calibration.result.geometry.encoder_zero)
+    fitted_mm, held_mm = calibration.result.residual_rms_m * 1e3, calibration.held_out.rms_m * 1e3
+    print(
+        f"encoder zeros {zeros[0]:.4f}, {zeros[1]:.4f} deg; fit {fitted_mm:.4f} mm RMS, "
+        f"held out {held_mm:.4f} mm RMS",
+        file=sys.stderr,
+    )
+
+
 def _compare(args: argparse.Namespace) -> None:
     from spm_opt.problem.problem import load_problem
     from spm_opt.studies.comparison import progress_line, run_planners, write_comparison
@@ -630,6 +738,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], None]] = {
     "compare": _compare,
     "evaluate": _evaluate,
     "identify": _identify,
+    "calibrate": _calibrate,
     "review": _review,
     "execute": _execute,
     "predict": _predict,

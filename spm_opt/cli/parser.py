@@ -342,6 +342,83 @@ def build_parser() -> argparse.ArgumentParser:
         help="samples slower than this are left out, rad/s (default 0.02)",
     )
 
+    calibrate = _command(
+        commands,
+        "calibrate",
+        "calibrate the robot's encoder zeros and geometry from a tracker's measurements",
+        "Chooses the poses (a D-optimal design), runs them as a plan through the executor, "
+        "pairs the log's readings with the tracker's still windows, fits the registration "
+        "and the robot's error angles, judges the fit at held-out poses, and writes the "
+        "robot file with its [calibration] (.md report and .png residuals beside it). "
+        "Without --log and --tracker it runs on the simulated robot with a simulated "
+        "tracker; with --write-plan it only writes the plan, for spm-opt execute.",
+    )
+    _problem_option(calibrate, "problem TOML whose robot is calibrated", paper=False)
+    calibrate.add_argument(
+        "--out",
+        type=Path,
+        help="robot TOML to write (.md and .png beside it; required unless --write-plan)",
+    )
+    calibrate.add_argument(
+        "--write-plan",
+        type=Path,
+        metavar="CSV",
+        help="only write the calibration plan here, for spm-opt execute (default: plan, run "
+        "and fit)",
+    )
+    calibrate.add_argument(
+        "--log",
+        type=Path,
+        help="execution log of the calibration plan's run, with --tracker (default: run it "
+        "on the simulated robot)",
+    )
+    calibrate.add_argument(
+        "--tracker",
+        type=Path,
+        metavar="FILE",
+        help="the tracker's export of that run: point CSV, pose CSV or OptiTrack Motive CSV "
+        "(default: the simulated tracker's)",
+    )
+    calibrate.add_argument(
+        "--body", help="rigid body or marker to read from a Motive export (default: its only one)"
+    )
+    calibrate.add_argument(
+        "--poses", type=int, default=40, metavar="N", help="poses fitted (default 40)"
+    )
+    calibrate.add_argument(
+        "--held-out", type=int, default=8, metavar="N", help="poses never fitted (default 8)"
+    )
+    calibrate.add_argument(
+        "--marker-distance-mm",
+        type=float,
+        default=200.0,
+        metavar="MM",
+        help="the marker's distance from the isocenter along the tool, nominal (default 200)",
+    )
+    calibrate.add_argument(
+        "--tracker-fle-mm",
+        type=float,
+        default=0.2,
+        metavar="MM",
+        help="simulated tracker: localisation error per sample, 3-D RMS (default 0.2)",
+    )
+    calibrate.add_argument(
+        "--tracker-bias-mm",
+        type=float,
+        default=0.0,
+        metavar="MM",
+        help="simulated tracker: error per pose that averaging keeps, 3-D RMS (default 0)",
+    )
+    calibrate.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the held-out draw and the simulated tracker (default 0)",
+    )
+    _plant_robot(
+        calibrate, "robot TOML the simulated robot is built as (default: the problem's robot)"
+    )
+
     evaluate = _command(
         commands,
         "evaluate",

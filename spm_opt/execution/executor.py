@@ -55,6 +55,7 @@ from spm_opt.execution import preflight
 from spm_opt.execution.backend import CLOCK_EPSILON_S, Backend, Measurement
 from spm_opt.execution.ceiling import feed_ceiling
 from spm_opt.execution.cycle import ControlLoop, Cycle, Fault
+from spm_opt.execution.encoders import calibrated
 from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace
 from spm_opt.execution.log import LogWriter, Write
 from spm_opt.execution.moves import Segment, approach_move
@@ -91,7 +92,7 @@ class Executor:
         log_write: Write = os.write,
     ) -> None:
         self.problem = problem
-        self.backend = backend
+        self.backend = calibrated(backend, problem.robot.calibration)
         self.settings = settings or ExecutionSettings()
         self._log_write = log_write
         self._stop_requested: str | None = None

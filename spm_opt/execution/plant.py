@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spm_opt.model import dynamics
+from spm_opt.model import dynamics, geometry
 from spm_opt.model.params import Robot
 
 DEFAULT_POSITION_P_GAIN = 32
@@ -177,8 +177,16 @@ class StateTrace:
         return len(self._rows)
 
     def record(self, time_s: float, plant: DynamixelPlant) -> None:
-        """Append the plant's present state, sampled at ``time_s`` (s)."""
+        """Append the plant's present state, sampled at ``time_s`` (s): its position and
+        rate in the model's joint coordinates of its tool's true direction (its joint
+        angles themselves when its mechanism is ideal; :mod:`spm_opt.model.geometry`)."""
         q, v, goal = plant.position_rad, plant.velocity_rad_s, plant.goal_position_rad
+        mechanism = plant.robot.mechanism
+        if not mechanism.is_ideal:
+            q, v = (
+                geometry.model_joint_angles(q[None, :], mechanism)[0],
+                geometry.model_joint_rates(q[None, :], v[None, :], mechanism)[0],
+            )
         current = plant.current_a
         self._rows.append(
             (time_s, q[0], q[1], v[0], v[1], goal[0], goal[1], current[0], current[1])

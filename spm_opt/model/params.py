@@ -16,6 +16,7 @@ from spm_opt.base.errors import UnreachableError
 from spm_opt.base.fields import Table, apply_overrides, read_toml
 from spm_opt.model import kinematics
 from spm_opt.model.actuator import ACTUATORS, LOOP_RATE_RANGE_PER_S, Actuator, CurrentTorqueMap
+from spm_opt.model.geometry import IDEAL, Geometry
 
 MM = 1e-3
 DEG = math.pi / 180.0
@@ -80,9 +81,18 @@ class Robot:
     actuator : Actuator
     gravity : float, m/s²
     encoder_offset : ndarray, shape (2,), rad
-        What each encoder reads at the model's θ = 0 (the encoders read θ + offset). Only
-        the simulated robot applies it: a plant whose encoders are not where the model
-        thinks; a model that knew its offset would be calibrated.
+        What each encoder of the robot as built reads at θ = 0 (the encoders read
+        θ + offset). Only the simulated robot applies it: a plant whose encoders are not
+        where the model thinks.
+    mechanism : Geometry
+        The error angles of the mechanism as built (its encoder zeros are
+        ``encoder_offset``; those of ``mechanism`` are 0). Only the simulated robot builds
+        it: its tool points where :attr:`built_geometry` says.
+    calibration : Geometry
+        What the lab measured of the robot (``[calibration]``, :mod:`spm_opt.calibration`):
+        the executor's goals and readings go through it (ideal: the model as it is).
+    calibration_record : dict
+        The calibration's provenance: date, data hash, tracker, fit and held-out errors.
     """
 
     name: str
@@ -97,6 +107,18 @@ class Robot:
     friction: Friction = field(default_factory=Friction)
     gravity: float = 9.81
     encoder_offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    mechanism: Geometry = IDEAL
+    calibration: Geometry = IDEAL
+    calibration_record: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def built_geometry(self) -> Geometry:
+        """The robot as built: :attr:`mechanism` with the encoders' ``encoder_offset``."""
+        return dataclasses.replace(
+            self.mechanism,
+            encoder_zero_1=float(self.encoder_offset[0]),
+            encoder_zero_2=float(self.encoder_offset[1]),
+        )
 
     @property
     def upper_platform_radius(self) -> float:
@@ -188,9 +210,72 @@ def load_robot(path: str | Path, overrides: Mapping[str, Any] | None = None) -> 
         payload=_payload(root.table("payload", required=False)),
         friction=_friction(root.table("friction", required=False)),
         encoder_offset=encoder_offset * DEG,
+        mechanism=_geometry(root.table("mechanism", required=False), zeros=False),
+        **_calibration(root.table("calibration", required=False)),
     )
     root.finish()
     return robot
+
+
+_ANGLE_LIMIT_DEG = 5.0
+"""Largest error angle a robot file takes, deg: calibration models small errors."""
+
+
+def _geometry(table: Table, zeros: bool) -> Geometry:
+    """Error angles from a ``[mechanism]`` or ``[calibration]`` table (deg in the file)."""
+    limits = {"minimum": -_ANGLE_LIMIT_DEG, "maximum": _ANGLE_LIMIT_DEG}
+    zero = (
+        table.vector("encoder_zero_deg", length=2, default=np.zeros(2), **limits)
+        if zeros
+        else (0, 0)
+    )
+    twist = table.number("axis_twist_deg", default=0.0, **limits)
+    arc = table.vector("arc_tilt_deg", length=2, default=np.zeros(2), **limits)
+    tool = table.vector("tool_tilt_deg", length=2, default=np.zeros(2), **limits)
+    return Geometry.from_vector(np.radians([*zero, twist, *arc, *tool]))
+
+
+CALIBRATION_STRINGS = ("date", "data_sha256", "tracker", "method")
+"""The text keys of a robot file's ``[calibration]`` provenance."""
+CALIBRATION_NUMBERS = (
+    "marker_distance_mm",
+    "poses",
+    "held_out_poses",
+    "residual_rms_mm",
+    "held_out_rms_mm",
+    "held_out_max_mm",
+    "predicted_tre_mm",
+    "condition_number",
+)
+"""Its number keys (mm, counts, the condition number)."""
+
+
+def _calibration(table: Table) -> dict[str, Any]:
+    """The ``[calibration]`` table: the geometry and its provenance."""
+    geometry = _geometry(table, zeros=True)
+    record: dict[str, Any] = {}
+    for key in CALIBRATION_STRINGS:
+        if table.has(key):
+            record[key] = table.string(key)
+    for key in CALIBRATION_NUMBERS:
+        if table.has(key):
+            record[key] = table.number(key, minimum=0.0)
+    if table.has("standard_error_deg"):
+        errors = table.table("standard_error_deg")
+        record["standard_error_deg"] = {k: errors.number(k, minimum=0.0) for k in errors.keys()}
+        errors.finish()
+    if table.has("unidentified"):
+        record["unidentified"] = list(table.raw("unidentified"))
+    table.finish()
+    return {"calibration": geometry, "calibration_record": record}
+
+
+def geometry_table(geometry: Geometry, zeros: bool) -> dict[str, Any]:
+    """``geometry`` as a robot file's table (deg), as :func:`load_robot` reads it."""
+    deg = np.degrees(geometry.vector()).tolist()
+    table: dict[str, Any] = {"encoder_zero_deg": deg[:2]} if zeros else {}
+    table.update(axis_twist_deg=deg[2], arc_tilt_deg=deg[3:5], tool_tilt_deg=deg[5:7])
+    return table
 
 
 _BODIES = ("upper_platform", "lower_platform", "upper_arc", "lower_arc")
@@ -342,4 +427,11 @@ def robot_toml(robot: Robot, name: str, description: str = "") -> str:
         "position_loop_gain_per_s": list(actuator.position_loop_gain_per_s),
         "velocity_loop_bandwidth_per_s": list(actuator.velocity_loop_bandwidth_per_s),
     }
+    if not robot.mechanism.is_ideal:
+        document["mechanism"] = geometry_table(robot.mechanism, zeros=False)
+    if not robot.calibration.is_ideal or robot.calibration_record:
+        document["calibration"] = {
+            **geometry_table(robot.calibration, zeros=True),
+            **robot.calibration_record,
+        }
     return tomli_w.dumps(document)

@@ -241,7 +241,7 @@ def _solve_segments(
     return _Plan(pieces, velocities, caps)
 
 
-def _join(pieces: list[PPoly]) -> tuple[PPoly, np.ndarray]:
+def join_pieces(pieces: list[PPoly]) -> tuple[PPoly, np.ndarray]:
     """Segments one after another: the whole motion and the landmark visit times, s."""
     offsets = np.concatenate([[0.0], np.cumsum([p.x[-1] for p in pieces])])
     breaks = [p.x[1:] + o for p, o in zip(pieces, offsets[:-1], strict=True)]
@@ -292,7 +292,7 @@ class RuckigPlanner:
         jerk = bounds.joint_jerk or settings.default_jerk_rad_s3
         for _ in range(MAX_ROUNDS):
             plan, rounds = _solve_within_tool_speed(problem, settings, acceleration, jerk)
-            positions, landmark_times = _join(plan.pieces)
+            positions, landmark_times = join_pieces(plan.pieces)
             if _peak_torque(problem, positions) <= torque_limit(problem):
                 break
             acceleration, jerk = acceleration * TORQUE_STEP, jerk * TORQUE_STEP

@@ -253,13 +253,16 @@ class Problem:
     @cached_property
     def fingerprint(self) -> str:
         """SHA-256 (hex) of what a plan must have been made for: the landmarks, whether the
-        cut is closed, the limits and the robot (every parameter but its name and its
-        actuators' loop parameters, which the executor's lead uses and no plan does).
+        cut is closed, the limits and the robot (every parameter but its name, its
+        actuators' loop parameters, which the executor's lead uses and no plan does, and its
+        calibration and built mechanism, which the executor's encoders and the simulated
+        robot use: a plan is in the model's joint coordinates).
         Names, descriptions, segment durations, planner options and the file's own bytes
         (its comments, its layout) are left out: a plan made under an equal fingerprint
         keeps the same limits on the same robot through the same landmarks."""
         robot = dataclasses.asdict(self.robot)
-        del robot["name"]
+        for key in ("name", "mechanism", "calibration", "calibration_record"):
+            del robot[key]
         for loop in ("position_loop_gain_per_s", "velocity_loop_bandwidth_per_s"):
             del robot["actuator"][loop]
         what = {

@@ -494,7 +494,7 @@ def _rows(path: Path, columns: tuple[str, ...]) -> list[tuple[int, list[str]]]:
     return rows[1:]
 
 
-def _number(path: Path, line: int, column: str, text: str) -> float:
+def number_cell(path: Path, line: int, column: str, text: str) -> float:
     try:
         value = float(text)
     except ValueError:
@@ -538,7 +538,7 @@ def read_capture_csv(path: str | Path) -> MarkerTrack:
         if not any(cells[1:]):
             occluded.append(line)
             continue
-        time = _number(path, line, "time_s", cells[0])
+        time = number_cell(path, line, "time_s", cells[0])
         if previous is not None and time <= previous[1]:
             raise InputError(
                 f"{path}: line {line}, column time_s = {cells[0]!r}: times must increase "
@@ -548,7 +548,7 @@ def read_capture_csv(path: str | Path) -> MarkerTrack:
         times.append(time)
         points.append(
             [
-                _number(path, line, c, t) * MM
+                number_cell(path, line, c, t) * MM
                 for c, t in zip(CAPTURE_COLUMNS[1:], cells[1:], strict=True)
             ]
         )
@@ -590,7 +590,7 @@ def read_landmarks_csv(path: str | Path) -> tuple[tuple[str, ...], np.ndarray]:
         names.append(name)
         points.append(
             [
-                _number(path, line, c, t) * MM
+                number_cell(path, line, c, t) * MM
                 for c, t in zip(LANDMARK_COLUMNS[1:], cells[1:], strict=True)
             ]
         )

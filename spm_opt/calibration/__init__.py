@@ -1,0 +1,1 @@
+"""Kinematic calibration from a tracker: encoder zeros and the mechanism's geometry."""
