@@ -4,16 +4,19 @@ The run's log says when, on the robot's clock, the robot dwelt at each pose, and
 encoders read throughout. The tracker's own clock is offset from the robot's by an unknown
 constant. Both show when the marker is still: a sample is still when the median of the
 marker's positions over :data:`HALF_WINDOW_S` before it and the median over as long after
-it lie within :data:`STILL_M` of each other (medians over 0.4 s average a tracker's jitter
-of 0.1–0.25 mm down to a few hundredths, while a move of this robot covers millimetres in
-that time). The log's marker is where the ideal kinematics put it at the logged readings
-(the error angles move it by far less than a move does). The offset is the one at which the
-tracker's still samples agree most with the log's (a search at :data:`COARSE_STEP_S`, then
-:data:`LAG_STEP_S`); the moves between poses differ in length, so the pattern agrees at one
-offset only. Each pose's
-position is then the mean of the tracker's samples inside its averaging window, moved by
-the offset and trimmed at both ends by :data:`TRIM_S`. Frames the tracker lost are absent
-from the recording.
+it lie within a threshold of each other. The threshold is :data:`STILL_M`, or more for a
+noisy or slow tracker: :data:`GAP_SIGMAS` standard deviations of the gap between two
+medians of still samples, from the tracker's jitter as its second differences measure it
+(:func:`jitter_m`). Medians over 0.4 s average a jitter of 0.1–0.25 mm down to a few
+hundredths at 60 Hz, while a move of this robot covers millimetres in that time; the log's
+path is judged with the same threshold. The log's marker is where the ideal kinematics put
+it at the logged readings (the error angles move it by far less than a move does). The
+offset is the one at which the tracker's still samples agree most with the log's (a search
+at :data:`COARSE_STEP_S`, then :data:`LAG_STEP_S`); the moves between poses differ in
+length, so the pattern agrees at one offset only. Each pose's position is then the mean of
+the tracker's samples inside its averaging window, moved by the offset and trimmed at both
+ends by :data:`TRIM_S`. Frames the tracker lost are absent from the recording: a window
+of time, not of samples, spans them, so a dropout does not split a dwell.
 """
 
 from __future__ import annotations
@@ -29,7 +32,12 @@ HALF_WINDOW_S = 0.4
 """Each half of the window whose medians decide whether a sample is still, s."""
 
 STILL_M = 0.2e-3
-"""Largest distance between the two medians of a still sample, m."""
+"""Least threshold on the distance between the two medians of a still sample, m."""
+
+GAP_SIGMAS = 4.0
+"""The threshold in standard deviations of a still sample's gap between medians: the gap's
+length is then above it for about 0.1 % of still samples (a χ distribution of 3 degrees of
+freedom)."""
 
 COARSE_STEP_S = 0.1
 LAG_STEP_S = 0.02
@@ -59,9 +67,39 @@ class DwellMeans:
     agreement: float
 
 
-def still_samples(times_s: np.ndarray, points_m: np.ndarray) -> np.ndarray:
+def jitter_m(times_s: np.ndarray, points_m: np.ndarray) -> float:
+    """A tracker's jitter, the standard deviation per coordinate of its samples about the
+    marker's path, m, from its path (times (k,), s; points (k, 3), m).
+
+    The median of the second differences' absolute values over runs of three samples evenly
+    spaced in time, over 0.6745 √6: robust to the moves, whose second differences at a
+    tracker's rate are far below its jitter, and to the dropouts, which leave a run uneven.
+    """
+    steps = np.diff(times_s)
+    if len(steps) < 2:
+        return 0.0
+    even = np.abs(steps[1:] - steps[:-1]) <= 0.25 * np.minimum(steps[1:], steps[:-1])
+    second = points_m[2:][even] - 2.0 * points_m[1:-1][even] + points_m[:-2][even]
+    if not second.size:
+        return 0.0
+    return float(np.median(np.abs(second))) / (0.6745 * np.sqrt(6.0))
+
+
+def still_threshold(times_s: np.ndarray, points_m: np.ndarray) -> float:
+    """The threshold on a sample's gap between medians for a tracker's path (times (k,), s;
+    points (k, 3), m): :data:`STILL_M`, or :data:`GAP_SIGMAS` standard deviations of the gap
+    (a median of n samples has 1.2533 σ/√n), m."""
+    span = float(times_s[-1] - times_s[0]) if len(times_s) > 1 else 0.0
+    per_half = max(len(times_s) * HALF_WINDOW_S / span, 1.0) if span > 0.0 else 1.0
+    gap = 1.2533 * jitter_m(times_s, points_m) * np.sqrt(2.0 / per_half)
+    return max(STILL_M, GAP_SIGMAS * gap)
+
+
+def still_samples(
+    times_s: np.ndarray, points_m: np.ndarray, threshold_m: float = STILL_M
+) -> np.ndarray:
     """Whether each sample (k,) of a marker's path (times (k,), s; points (k, 3), m) is
-    still (see the module's docstring)."""
+    still: its gap between medians at most ``threshold_m``, m (see the module's docstring)."""
     still = np.zeros(len(times_s), dtype=bool)
     starts = np.searchsorted(times_s, times_s - HALF_WINDOW_S)
     ends = np.searchsorted(times_s, times_s + HALF_WINDOW_S, side="right")
@@ -69,7 +107,7 @@ def still_samples(times_s: np.ndarray, points_m: np.ndarray) -> np.ndarray:
         before, after = points_m[starts[k] : k + 1], points_m[k : ends[k]]
         if len(before) >= 3 and len(after) >= 3:
             gap = np.median(before, axis=0) - np.median(after, axis=0)
-            still[k] = float(np.linalg.norm(gap)) <= STILL_M
+            still[k] = float(np.linalg.norm(gap)) <= threshold_m
     return still
 
 
@@ -104,8 +142,9 @@ def dwell_means(
     times, points = track.times_s, track.points_m
     if len(times) < 2 or len(log_times_s) < 2:
         raise InputError(f"{source}: too short a recording to pair with the run")
-    tracker_still = still_samples(times, points)
-    log_still = still_samples(log_times_s, log_marker_m)
+    threshold = still_threshold(times, points)
+    tracker_still = still_samples(times, points, threshold)
+    log_still = still_samples(log_times_s, log_marker_m, threshold)
 
     def agreement_at(lags: np.ndarray) -> np.ndarray:
         scores = np.empty(len(lags))
