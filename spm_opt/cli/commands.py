@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import logging
 import math
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -78,7 +80,7 @@ def _execute(args: argparse.Namespace) -> None:
         if args.start_deg is not None:
             start = np.radians(_pair(args.start_deg, "--start-deg", float))
         plant = None if args.plant_robot is None else load_robot(args.plant_robot)
-        realtime = args.realtime or keys is not None  # keys need the wall clock
+        realtime = args.realtime or keys is not None or args.igtl is not None  # the wall clock
         backend = SimulatedRobot(
             problem.robot, start_rad=start, realtime=realtime, plant_robot=plant
         )
@@ -93,8 +95,18 @@ def _execute(args: argparse.Namespace) -> None:
         ids = _pair(args.ids, "--ids", int)
         backend = DynamixelRobot(problem.robot.actuator, args.port, args.baud, ids)
     executor = Executor(problem, backend, settings)
-    with console(executor, problem, trajectory, sys.stderr, keys):
-        result = executor.run(trajectory, args.log)
+    with contextlib.ExitStack() as stack:
+        link = None
+        if args.igtl is not None:
+            from spm_opt.navigation.link import NavigationLink
+
+            link = NavigationLink(problem, trajectory, executor, args.igtl_host, args.igtl)
+            stack.enter_context(link)
+            print(f"OpenIGTLink server on {args.igtl_host}:{link.server.port}", file=sys.stderr)
+        with console(executor, problem, trajectory, sys.stderr, keys):
+            result = executor.run(trajectory, args.log)
+        if link is not None:
+            link.finished(result)
     if args.trace is not None:
         backend.trace.save(args.trace)
     loop = result.statistics
@@ -104,6 +116,35 @@ def _execute(args: argparse.Namespace) -> None:
     )
     if not result.succeeded:
         raise GateFailed(_outcome(result))
+
+
+def _navigate(args: argparse.Namespace) -> None:
+    import numpy as np
+
+    from spm_opt.navigation.flap import plan_flap
+    from spm_opt.navigation.link import NavigationLink, ReceivedFlap
+    from spm_opt.problem.problem import load_problem
+
+    problem = load_problem(args.problem)
+    check_output_directory(args.out, "--out")
+
+    def plan(
+        flap: ReceivedFlap, planner: str, command_id: str, image_to_robot: np.ndarray
+    ) -> tuple[Problem, Trajectory]:
+        return plan_flap(problem, flap, planner, command_id, image_to_robot, args.out)
+
+    port = 18944 if args.igtl is None else args.igtl
+    with NavigationLink(problem, host=args.igtl_host, port=port, plan=plan) as link:
+        args.out.mkdir(parents=True, exist_ok=True)
+        print(
+            f"OpenIGTLink server on {args.igtl_host}:{link.server.port}: send a POINT list "
+            "and CMD_<id> 'PLAN [planner]' from 3D Slicer; Ctrl-C ends",
+            file=sys.stderr,
+        )
+        try:
+            threading.Event().wait()
+        except KeyboardInterrupt:
+            print("navigate: ended", file=sys.stderr)
 
 
 def _check_predicted_cut(
@@ -741,6 +782,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], None]] = {
     "calibrate": _calibrate,
     "review": _review,
     "execute": _execute,
+    "navigate": _navigate,
     "predict": _predict,
     "compensate": _compensate,
     "emulate": _emulate,

@@ -257,6 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
     _out(review, "directory for review.html and review.png (made if missing)")
 
     _execute_parser(commands)
+    _navigate_parser(commands)
     _predict_parser(commands)
     _compensate_parser(commands)
     _emulate_parser(commands)
@@ -566,6 +567,62 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         help="steer from the terminal: space hold/resume, + and - feed 10%%, q stop "
         "(sim: runs on the wall clock; default: no keys)",
     )
+    _igtl(
+        execute,
+        "show the run in 3D Slicer: an OpenIGTLink server on PORT (default 18944, Slicer's) "
+        "streams the tool's pose (ToolToRAS), the plan, the executed cut and the run's state, "
+        "and takes STOP, HOLD and RESUME (never a start); sim: runs on the wall clock "
+        "(default: no server)",
+    )
+
+
+def _navigate_parser(commands: argparse._SubParsersAction) -> None:
+    navigate = _command(
+        commands,
+        "navigate",
+        "plan flaps drawn in 3D Slicer, over OpenIGTLink, and send the planned cut back",
+        "Serves an OpenIGTLink server until Ctrl-C: a POINT list from Slicer is the flap (in "
+        "the image's RAS, mm), STRING CMD_<id> 'PLAN [planner]' writes it to --out as a "
+        "markups file and a problem file based on --problem, plans it there and sends the "
+        "planned cut back as the PlannedCut model; a TRANSFORM RASToRobot is the registration "
+        "from then on. Nothing moves: run the files with spm-opt execute.",
+    )
+    _problem_option(
+        navigate, "problem TOML the flaps are planned on (its robot, skull, limits)", paper=False
+    )
+    _out(navigate, "directory for each flap's markups, problem and plan files (made if missing)")
+    _igtl(navigate, "the OpenIGTLink server's port (default 18944, Slicer's)")
+
+
+def _igtl(command: argparse.ArgumentParser, help_text: str) -> None:
+    """``--igtl [PORT]`` and ``--igtl-host``: the navigation link's server."""
+    command.add_argument(
+        "--igtl",
+        type=_igtl_port,
+        nargs="?",
+        const=18944,
+        default=None,
+        metavar="PORT",
+        help=help_text,
+    )
+    command.add_argument(
+        "--igtl-host",
+        default="127.0.0.1",
+        metavar="ADDRESS",
+        help="the address the OpenIGTLink server listens on (default 127.0.0.1: this "
+        "machine only; 0.0.0.0: every interface)",
+    )
+
+
+def _igtl_port(text: str) -> int:
+    """A TCP port, 1 to 65535 (0: any free one, said in the log)."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a TCP port, 0 to 65535")
+    return port
 
 
 def _model_robot(command: argparse.ArgumentParser) -> None:

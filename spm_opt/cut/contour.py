@@ -9,6 +9,7 @@ surface: the cut point ρ(p) p.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -16,6 +17,7 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from spm_opt.model import kinematics
+from spm_opt.model.params import MM
 from spm_opt.skull.landmark_surface import LandmarkSurface
 from spm_opt.skull.surface import SkullSurface
 
@@ -265,6 +267,14 @@ class Contour:
         """
         radius, gradient = self.surface.radius_gradient(np.asarray(directions, dtype=float))
         return surface_speed(radius, gradient, direction_rates)
+
+
+def segment_durations_s(points_m: np.ndarray, closed: bool, speed_mm_s: float) -> list[float]:
+    """Duration of each segment of a cut through landmarks (n, 3), m, s: the segment's
+    length along the contour (great-circle arc, skull radius interpolated) at
+    ``speed_mm_s`` (mm/s, > 0), rounded up to 0.1 s, at least 1 s."""
+    lengths_mm = Contour(np.asarray(points_m, dtype=float), closed=closed).arc_lengths / MM
+    return [max(1.0, math.ceil(round(length / speed_mm_s * 10, 6)) / 10) for length in lengths_mm]
 
 
 def surface_speed(radius: np.ndarray, gradient: np.ndarray, rates: np.ndarray) -> np.ndarray:

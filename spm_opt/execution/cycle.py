@@ -68,6 +68,8 @@ CURRENT_READ_SMOOTHING = 0.1
 CURRENT_READ_MARGIN = 2.0
 """Current reads are spread over the span that ends this many average reads before the
 cycle's deadline, so that the cycle's own read seldom waits for one."""
+INTERRUPTED = "interrupted"
+"""How the reason of a run ended by a stop asked for (SIGINT, SIGTERM, a key, STOP) begins."""
 
 
 class Ticker:
@@ -376,7 +378,7 @@ class ControlLoop:
         """Why the run must stop after this cycle's reading ("" if it need not): see
         :meth:`check`. Records the following error in the cycle."""
         if stop_requested:
-            return f"interrupted ({stop_requested})"
+            return f"{INTERRUPTED} ({stop_requested})"
         if cycle.unexpected:
             return cycle.unexpected
         failures = self.failed_cycles + 1 if cycle.read_failed else 0
@@ -487,6 +489,12 @@ class ControlLoop:
             following_error_rad=None if error is None else float(np.max(error)),
             torque_nm=None if torque is None else (float(torque[0]), float(torque[1])),
             status=cycle.status,
+            measured_rad=None
+            if cycle.measurement is None
+            else (
+                float(cycle.measurement.position_rad[0]),
+                float(cycle.measurement.position_rad[1]),
+            ),
         )
 
 

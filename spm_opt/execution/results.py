@@ -97,6 +97,9 @@ class RunStatus:
         The actuators' torques from their current (None after a failed read).
     status : str
         The log's status of the cycle.
+    measured_rad : tuple of float, or None, rad
+        The joint angles the cycle read, as the log records them (None after a failed
+        read).
     """
 
     time_s: float
@@ -109,6 +112,7 @@ class RunStatus:
     following_error_rad: float | None
     torque_nm: tuple[float, float] | None
     status: str
+    measured_rad: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -301,6 +301,29 @@ class Problem:
             }
         return record
 
+    def along_contour(
+        self, arc_lengths_mm: list[float], segment_durations_s: list[float], name: str
+    ) -> Problem:
+        """An open problem through points of this one's contour at ``arc_lengths_mm`` (mm
+        from its first landmark), with ``segment_durations_s`` (s): the same robot, skull
+        and limits, for a short run along part of the cut (a dry run, a test)."""
+        points = self.contour.point_at(np.asarray(arc_lengths_mm, dtype=float) * MM)
+        skull = self.skull
+        if skull is not None and skull.landmark_shifts_mm is not None:
+            skull = dataclasses.replace(skull, landmark_shifts_mm=np.zeros(len(points)))
+        return dataclasses.replace(
+            self,
+            name=name,
+            description=f"{len(points)} points along the contour of {self.name}",
+            landmark_names=tuple(f"S{i + 1}" for i in range(len(points))),
+            landmarks=points,
+            skull=skull,
+            closed=False,
+            segment_durations=np.asarray(segment_durations_s, dtype=float),
+            source=None,
+            source_sha256=None,
+        )
+
     @property
     def visit_order(self) -> list[int]:
         """Landmark indices in the order the cut visits them (the first again if closed)."""

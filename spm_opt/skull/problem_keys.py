@@ -197,6 +197,7 @@ def skull_on_mesh(
     fit = {
         "registration_rms_mm": None if registration is None else registration.rms_mm,
         "fiducial_residuals_mm": None if registration is None else registration.residuals_mm,
+        "image_to_robot_mm": keys.image_to_robot_mm,
     }
     if keys.outer is None:
         return Skull(LandmarkSurface(landmarks), **fit), landmarks

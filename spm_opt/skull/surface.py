@@ -55,6 +55,9 @@ class Skull:
         SHA-256 (hex) of what a plan depends on: the meshes in the robot's frame.
     depth_margin : float, m
         The tool tip's depth setpoint lies this far outside the inner surface.
+    image_to_robot_mm : ndarray (4, 4) or None
+        The registration: the image's RAS coordinates, mm, to the robot's frame, mm (None
+        when the problem gives none).
     """
 
     surface: SkullSurface
@@ -65,3 +68,4 @@ class Skull:
     landmark_shifts_mm: np.ndarray | None = None
     fingerprint: str = ""
     depth_margin: float = 0.0
+    image_to_robot_mm: np.ndarray | None = None

@@ -54,7 +54,7 @@ from scipy.optimize import brentq
 
 from spm_opt.base.errors import InputError, UnreachableError
 from spm_opt.base.input_limits import excerpt
-from spm_opt.cut.contour import Contour
+from spm_opt.cut.contour import segment_durations_s
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
 from spm_opt.problem.problem import Problem
@@ -142,10 +142,7 @@ class Flap:
             raise InputError(
                 f"speed_mm_s = {excerpt(speed_mm_s)}: expected a positive number (mm/s)"
             )
-        lengths_mm = Contour(self.positions_mm * MM, closed=True).arc_lengths / MM
-        return [
-            max(1.0, math.ceil(round(length / speed_mm_s * 10, 6)) / 10) for length in lengths_mm
-        ]
+        return segment_durations_s(self.positions_mm * MM, True, speed_mm_s)
 
     def problem(self, base: Problem, speed_mm_s: float) -> Problem:
         """The base problem (robot, limits, options) cutting this flap, with its drawn limits,

@@ -1,0 +1,98 @@
+"""``spm-opt execute --backend sim --igtl`` on the skull problem, seen by a pyigtl peer: the
+received ToolToRAS matrices are the log's measured angles through the paper's kinematics
+and the registration, at the stated rate, and the states follow the run's phases; STOP
+from the peer ends a run in the safe stop as fast as Ctrl-C does."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pyigtl
+import pytest
+
+import spm_opt as so
+from spm_opt.execution.log import read_log
+from spm_opt.navigation.link import POSE_RATE_HZ
+from tests.igtl_peer import Peer
+from tests.navigation_helpers import ROOT, SKULL_PROBLEM, float32_close, tool_to_ras_expected
+from tests.test_navigate_command import _free_port
+
+pytestmark = [pytest.mark.slow, pytest.mark.real_time]
+
+
+@pytest.fixture(scope="module")
+def skull_plan(tmp_path_factory):
+    path = tmp_path_factory.mktemp("plan") / "toppra.csv"
+    so.plan(so.load_problem(SKULL_PROBLEM), planner="toppra").to_csv(path)
+    return path
+
+
+def _execute(plan, log, port: int, *extra: str) -> subprocess.Popen:
+    command = [sys.executable, "-m", "spm_opt.cli", "execute", str(plan), "--problem"]
+    command += [str(SKULL_PROBLEM), "--backend", "sim", "--log", str(log)]
+    command += ["--igtl", str(port), *extra]
+    return subprocess.Popen(command, cwd=ROOT, stderr=subprocess.PIPE, text=True)
+
+
+def test_the_stream_of_a_whole_run_is_its_log(tmp_path, skull_plan):
+    port, log = _free_port(), tmp_path / "run.csv"
+    process = _execute(skull_plan, log, port, "--approach", "--start-deg", "1,-1")
+    peer = Peer(port)
+    peer.wait_for(lambda m: m.device == "RunState" and m.content[1] in ("at rest", "fault"), 180)
+    _, stderr = process.communicate(timeout=60)
+    peer.close()
+    assert process.returncode == 0, stderr
+
+    table, header = read_log(log)
+    times = table["time_s"].to_numpy()
+    q = table[["position_theta1_rad", "position_theta2_rad"]].to_numpy()
+    poses = peer.of("ToolToRAS")
+    for message in poses:
+        row = int(np.argmin(np.abs(times - message.timestamp_s)))
+        assert abs(times[row] - message.timestamp_s) < 2e-6
+        assert float32_close(message.content, tool_to_ras_expected(q[row])), message.timestamp_s
+    stamps = np.array([m.timestamp_s for m in poses])
+    arrived = np.array([m.arrived_s for m in poses])
+    rate = len(stamps) / (stamps[-1] - stamps[0])
+    assert rate >= 30.0 and len(poses) / (arrived[-1] - arrived[0]) >= 30.0
+    assert np.median(np.diff(stamps)) == pytest.approx(1.0 / POSE_RATE_HZ, abs=0.011)
+
+    # the states are the run's phases in order; the log's, mapped the same way
+    phases = table["phase"].to_numpy()
+    order = {"approach": "approach", "plan": "running", "settle": "settling"}
+    logged = [order[p] for i, p in enumerate(phases) if i == 0 or p != phases[i - 1]]
+    states = peer.states()
+    assert states[-1] == "at rest" and header["completed"]
+    assert [s for s in states if s not in ("ready", "at rest")] == logged
+
+
+@pytest.mark.parametrize("how", ["STOP", "SIGINT"])
+def test_stop_from_slicer_is_as_fast_as_ctrl_c(tmp_path, skull_plan, how, record_property):
+    port, log = _free_port(), tmp_path / "run.csv"
+    process = _execute(skull_plan, log, port)
+    peer = Peer(port)
+    running = peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "running", 120)
+    # well into the plan: after 1 s of it
+    peer.wait_for(lambda m: m.device == "ToolToRAS" and m.arrived_s > running.arrived_s + 1.0)
+    sent = time.monotonic()
+    if how == "STOP":
+        peer.send(pyigtl.StringMessage("STOP", device_name="CMD_1"))
+    else:
+        process.send_signal(signal.SIGINT)
+    stopping = peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "stopping")
+    peer.wait_for(lambda m: m.device == "RunState" and m.content[1] in ("stopped", "fault"), 60)
+    _, stderr = process.communicate(timeout=60)
+    peer.close()
+    _, header = read_log(log)
+    assert process.returncode == 1, stderr  # a safe stop
+    assert header["stop"]["at_rest"] and peer.states()[-1] == "stopped"
+    latency = stopping.arrived_s - sent
+    record_property("stopping_after_s", latency)
+    record_property("at_rest_after_fault_s", header["stop"]["duration_s"])
+    # the request is seen by the next cycle (10 ms) and shown by the next state (20 ms)
+    assert latency < 0.25, latency
+    assert header["stop"]["duration_s"] < 1.0
