@@ -27,6 +27,7 @@ from timing import ROOT, write_results
 
 import spm_opt as so
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+from spm_opt.execution.log import read_log
 from spm_opt.navigation.link import NavigationLink
 
 PROBLEM = ROOT / "problems" / "skull_flap.toml"
@@ -103,15 +104,6 @@ def run_once(problem, plan, condition: str, log: Path) -> dict:
     if condition == CONDITIONS[0]:
         result = executor.run(plan, log)
         return {"statistics": result.statistics, "poses": []}
-    origin: list[float] = []
-
-    def watch_origin() -> None:  # the loop's clock origin, to date each pose's cycle
-        while not origin and not done.is_set():
-            loop = executor._loop  # noqa: SLF001 - a benchmark reads the executor's loop
-            if loop is not None:
-                origin.append(loop.ticker.origin)
-            time.sleep(0.001)
-
     done = threading.Event()
     with NavigationLink(problem, plan, executor, port=0) as link:
         port = link.server.port
@@ -125,8 +117,6 @@ def run_once(problem, plan, condition: str, log: Path) -> dict:
             flooder = threading.Thread(target=flood, args=(port, done), daemon=True)
             flooder.start()
         time.sleep(0.3)  # the clients connected and got the models
-        watcher = threading.Thread(target=watch_origin, daemon=True)
-        watcher.start()
         result = executor.run(plan, log)
         done.set()
         poses = [p for r in readers for p in r.poses] if condition.endswith("reading") else []
@@ -134,7 +124,8 @@ def run_once(problem, plan, condition: str, log: Path) -> dict:
             reader.close()
         if flooder is not None:
             flooder.join(timeout=2.0)
-    latencies = [arrived - (origin[0] + stamp) for arrived, stamp in poses] if origin else []
+    origin = read_log(log)[1]["clock_origin_s"]  # the log's time 0 on the loop's clock
+    latencies = [arrived - (origin + stamp) for arrived, stamp in poses]
     stamps = sorted({stamp for _, stamp in poses})
     rate = (len(stamps) - 1) / (stamps[-1] - stamps[0]) if len(stamps) > 1 else float("nan")
     return {"statistics": result.statistics, "latencies": latencies, "rate_hz": rate}

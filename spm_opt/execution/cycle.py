@@ -46,6 +46,7 @@ from __future__ import annotations
 import logging
 import math
 import random
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -205,6 +206,8 @@ class ControlLoop:
     plan_duration_s : float, s
     previous : RunStatus or None
         The status before this run (its plan time shows until the plan phase begins).
+    status_changed : threading.Condition, optional
+        Notified after each new :attr:`status`, for a reader that works between cycles.
     """
 
     def __init__(
@@ -218,7 +221,9 @@ class ControlLoop:
         first: Measurement,
         plan_duration_s: float,
         previous: RunStatus | None,
+        status_changed: threading.Condition | None = None,
     ) -> None:
+        self._status_changed = status_changed
         self._problem, self._settings = problem, settings
         self._backend, self._lead, self._writer = backend, lead, writer
         self._requests = requests
@@ -496,6 +501,9 @@ class ControlLoop:
                 float(cycle.measurement.position_rad[1]),
             ),
         )
+        if self._status_changed is not None:
+            with self._status_changed:
+                self._status_changed.notify_all()
 
 
 def observe_hardware_errors(cycle: Cycle, errors: list[str]) -> None:

@@ -105,11 +105,26 @@ class Executor:
         self._feed_events: list[dict[str, Any]] = []
         self._loop: ControlLoop | None = None
         self._last_status: RunStatus | None = None
+        self._status_changed = threading.Condition()
 
     @property
     def status(self) -> RunStatus | None:
         """The run as it stands after the last cycle (None before the first)."""
         return self._loop.status if self._loop is not None else self._last_status
+
+    def next_status(self, after_s: float | None, timeout_s: float) -> RunStatus | None:
+        """The status of the first cycle after log time ``after_s`` (s; None: any), as
+        soon as the loop has made it, so that a reader (a live view, the navigation link)
+        works between cycles rather than across one; after ``timeout_s`` (s) the status as
+        it stands, newer or not (None before the first cycle)."""
+
+        def newer() -> bool:
+            status = self.status
+            return status is not None and (after_s is None or status.time_s > after_s)
+
+        with self._status_changed:
+            self._status_changed.wait_for(newer, timeout_s)
+        return self.status
 
     # ------------------------------------------------------------ the operator
     # Each may be called from any thread, before or during a run.
@@ -249,6 +264,7 @@ class Executor:
             first,
             trajectory.duration,
             self._last_status,
+            self._status_changed,
         )
         loop.phase = self._phase
         self._writer.note({"clock_origin_s": loop.ticker.origin})

@@ -38,7 +38,6 @@ from spm_opt.execution.console import ContourProgress
 from spm_opt.execution.cycle import INTERRUPTED
 from spm_opt.execution.executor import Executor
 from spm_opt.execution.results import ExecutionResult, RunStatus
-from spm_opt.model import kinematics
 from spm_opt.model.params import DEG, MM
 from spm_opt.navigation import igtl, scene
 from spm_opt.navigation.commands import Command, CommandReply, parse_command
@@ -268,21 +267,30 @@ class NavigationLink:
 
     def _publish(self) -> None:
         """Stream the pose at :data:`POSE_RATE_HZ`, the state on change, the information
-        and the trail at :data:`INFO_RATE_HZ`, until closed."""
-        period, every = 1.0 / POSE_RATE_HZ, max(1, round(POSE_RATE_HZ / INFO_RATE_HZ))
-        last_time, tick, start = None, 0, time.monotonic()
+        and the trail at :data:`INFO_RATE_HZ`, until closed. Each round starts right after
+        a control cycle (:meth:`Executor.next_status`), so its work falls in the loop's
+        idle time rather than across a cycle."""
+        period, info_period = 1.0 / POSE_RATE_HZ, 1.0 / INFO_RATE_HZ
+        sent_at: float | None = None  # the log time of the last pose sent
+        info_due = time.monotonic()
         try:
-            while not self._closing.wait(max(0.0, start + tick * period - time.monotonic())):
-                tick += 1
-                status = None if self.executor is None else self.executor.status
-                if status is not None and status.time_s != last_time:
-                    last_time = status.time_s
-                    self._send_pose(status)
+            while not self._closing.is_set():
+                if self.executor is None:
+                    self._closing.wait(period)
+                    status = None
+                else:
+                    after = None if sent_at is None else sent_at + 0.75 * period
+                    status = self.executor.next_status(after, period)
+                if status is not None and (sent_at is None or status.time_s > sent_at):
+                    if sent_at is None or status.time_s >= sent_at + 0.75 * period:
+                        sent_at = status.time_s
+                        self._send_pose(status)
                 with self._lock:
                     finished = self._finished
                 if not finished:
                     self._set_state(run_state(status), STATUS_OK, "")
-                if tick % every == 0:
+                if time.monotonic() >= info_due:
+                    info_due += info_period
                     self._send_info()
                     trail = self._trail_frame(scene.robot_to_ras(self.image_to_robot))
                     if trail is not None:
@@ -293,16 +301,14 @@ class NavigationLink:
     def _send_pose(self, status: RunStatus) -> None:
         if status.measured_rad is None:
             return
-        q = np.array([status.measured_rad])
-        to_ras = scene.robot_to_ras(self.image_to_robot)
-        pose = scene.tool_to_ras(self.problem, q, to_ras)[0]
+        in_robot = scene.tool_to_robot(self.problem, np.array([status.measured_rad]))[0]
+        pose = scene.robot_to_ras(self.image_to_robot) @ in_robot
         frame = self._frame("TRANSFORM", "ToolToRAS", igtl.transform_body(pose), status.time_s)
         self.server.send(frame, droppable=True)
         self.poses_sent += 1
         if status.phase in ("plan", "settle", "stop", "hold"):
-            point = self.problem.contour.cut_points(kinematics.forward_kinematics(q, 1.0))[0]
             with self._lock:
-                self._trail.append(point)
+                self._trail.append(in_robot[:3, 3] * MM)  # the tool tip: the cut point
                 if len(self._trail) > MAX_TRAIL_POINTS:
                     self._trail = self._trail[::2]
 
