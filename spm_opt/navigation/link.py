@@ -136,6 +136,7 @@ class NavigationLink:
             else ContourProgress(problem, trajectory)
         )
         self.flap: ReceivedFlap | None = None
+        self._model_frames: list[bytes] | None = None  # made by _models, once
         self._trail: list[np.ndarray] = []
         self._state, self._state_code, self._state_message = "ready", STATUS_OK, ""
         self._finished = False
@@ -147,7 +148,9 @@ class NavigationLink:
 
     # ------------------------------------------------------------------ the owner's side
     def start(self) -> None:
-        """Listen and start streaming (raises CommunicationError if the port is taken)."""
+        """Make the models, listen and start streaming (raises CommunicationError if the
+        port is taken)."""
+        self._models()
         self.server.start()
         self._publisher.start()
 
@@ -188,7 +191,19 @@ class NavigationLink:
         return igtl.pack(kind, device, body, time.time() if timestamp_s is None else timestamp_s)
 
     def _models(self) -> list[bytes]:
-        """The models and the registration, as a new client gets them."""
+        """The models and the registration, as a new client gets them: made once for each
+        registration and plan (a plan's cut is tens of kB, whose CRC a connection during a
+        run should not wait for), the trail as it stands."""
+        with self._lock:
+            frames = self._model_frames
+        if frames is None:
+            frames = self._make_models()
+            with self._lock:
+                self._model_frames = frames
+        trail = self._trail_frame(scene.robot_to_ras(self.image_to_robot))
+        return frames if trail is None else [*frames, trail]
+
+    def _make_models(self) -> list[bytes]:
         to_ras = scene.robot_to_ras(self.image_to_robot)
         frames = [self._frame("TRANSFORM", "RobotToRAS", igtl.transform_body(to_ras))]
         contour = scene.contour_points(self.problem, to_ras)
@@ -198,9 +213,6 @@ class NavigationLink:
             frames.append(self._polylines("TubeEdges", list(edges), closed=self.problem.closed))
         if self.trajectory is not None:
             frames.append(self._planned_cut(self.problem, self.trajectory, to_ras))
-        trail = self._trail_frame(to_ras)
-        if trail is not None:
-            frames.append(trail)
         return frames
 
     def _planned_cut(self, problem: Problem, trajectory: Trajectory, to_ras: np.ndarray) -> bytes:
@@ -342,6 +354,7 @@ class NavigationLink:
             return
         with self._lock:
             self._image_to_robot = matrix
+            self._model_frames = None
         _LOG.info("navigation: registration RASToRobot received; the robot is shown through it")
         for frame in self._models():
             self.server.send(frame)
@@ -393,7 +406,9 @@ class NavigationLink:
         def work() -> None:
             try:
                 problem, trajectory = plan(flap, planner, command_id, self.image_to_robot)
-                self.problem, self.trajectory = problem, trajectory
+                with self._lock:
+                    self.problem, self.trajectory = problem, trajectory
+                    self._model_frames = None
                 for frame in self._models():
                     self.server.send(frame)
                 reply = CommandReply.ok("PLAN", f"planned by {planner}: {problem.source}")
