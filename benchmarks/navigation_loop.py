@@ -3,22 +3,23 @@ link and no client, with clients attached (one that reads everything, as 3D Slic
 one that never reads; one that floods the server), and what a reading client gets: the
 tool pose's rate and its latency from the cycle that read the joints to its arrival.
 
-Each condition runs the same plan (a 12 mm flap on the skull problem, about 4 s of
-toppra) on the simulated robot on the wall clock at 100 Hz, ``--repeats`` times,
-interleaved. The reference is the run without the link, measured in the same run. Prints a
-table and writes benchmarks/results/navigation_loop.json.
+Each client is a process of its own, as 3D Slicer would be. Each condition runs the same
+plan (12 mm along the skull problem's contour, about 4 s of toppra) on the simulated robot
+on the wall clock at 100 Hz, ``--repeats`` times, interleaved. The reference is the run
+without the link, measured in the same run. Prints a table and writes
+benchmarks/results/navigation_loop.json.
 
-    python benchmarks/navigation_loop.py [--repeats 5]
+    python benchmarks/navigation_loop.py [--repeats 10]
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import socket
 import struct
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -41,61 +42,58 @@ CONDITIONS = (
 )
 
 
-class Reader:
-    """Reads every message; keeps the arrival time (perf_counter, the simulated robot's
-    clock) and log time of each ToolToRAS."""
+def _exactly(sock: socket.socket, size: int) -> bytes | None:
+    data = b""
+    while len(data) < size:
+        try:
+            chunk = sock.recv(size - len(data))
+        except OSError:
+            return None
+        if not chunk:
+            return None
+        data += chunk
+    return data
 
-    def __init__(self, port: int, read: bool = True) -> None:
-        self.sock = socket.create_connection(("127.0.0.1", port))
-        self.poses: list[tuple[float, float]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read if read else self._idle, daemon=True)
-        self._thread.start()
 
-    def _exactly(self, size: int) -> bytes | None:
-        data = b""
-        while len(data) < size and not self._stop.is_set():
-            try:
-                chunk = self.sock.recv(size - len(data))
-            except OSError:
-                return None
-            if not chunk:
-                return None
-            data += chunk
-        return data if len(data) == size else None
-
-    def _read(self) -> None:
-        while (header := self._exactly(58)) is not None:
-            kind = header[2:14].rstrip(b"\0")
-            device = header[14:34].rstrip(b"\0")
+def read_client(port: int, poses: multiprocessing.Queue) -> None:
+    """A client process that reads every message until the server closes; puts the arrival
+    time (perf_counter: CLOCK_MONOTONIC, the simulated robot's clock) and log time of each
+    ToolToRAS on ``poses``."""
+    arrivals = []
+    with socket.create_connection(("127.0.0.1", port)) as sock:
+        while (header := _exactly(sock, 58)) is not None:
+            kind, device = header[2:14].rstrip(b"\0"), header[14:34].rstrip(b"\0")
             seconds, fraction, size = struct.unpack(">IIQ", header[34:50])
-            if self._exactly(size) is None:
-                return
+            if _exactly(sock, size) is None:
+                break
             if kind == b"TRANSFORM" and device == b"ToolToRAS":
-                self.poses.append((time.perf_counter(), seconds + fraction / 2**32))
-
-    def _idle(self) -> None:
-        self._stop.wait()
-
-    def close(self) -> None:
-        self._stop.set()
-        self.sock.close()
-        self._thread.join(timeout=2.0)
+                arrivals.append((time.perf_counter(), seconds + fraction / 2**32))
+    poses.put(arrivals)
 
 
-def flood(port: int, until: threading.Event) -> None:
-    """Send POINT bodies at the server's bound, each with a wrong CRC, as fast as TCP takes."""
+def idle_client(port: int, poses: multiprocessing.Queue) -> None:
+    """A client process that connects and never reads."""
+    with socket.create_connection(("127.0.0.1", port)):
+        time.sleep(3600)
+
+
+def flood_client(port: int, poses: multiprocessing.Queue) -> None:
+    """A client process that sends POINT bodies at the server's bound, each with a wrong
+    CRC, as fast as TCP takes them."""
     body = b"\0" * (136 * 722)
     frame = struct.pack(">H12s20sIIQQ", 1, b"POINT", b"Flap", 0, 0, len(body), 1) + body
     with socket.create_connection(("127.0.0.1", port)) as sock:
-        sock.settimeout(0.1)
-        while not until.is_set():
-            try:
-                sock.send(frame)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
+        while True:
+            sock.sendall(frame)
+
+
+CLIENTS = {
+    "link, no client": [],
+    "one client reading": [read_client],
+    "four clients reading": [read_client] * 4,
+    "a client that never reads": [idle_client],
+    "a client flooding POINT bodies": [flood_client],
+}
 
 
 def run_once(problem, plan, condition: str, log: Path) -> dict:
@@ -103,30 +101,31 @@ def run_once(problem, plan, condition: str, log: Path) -> dict:
     executor = Executor(problem, backend, ExecutionSettings())
     if condition == CONDITIONS[0]:
         result = executor.run(plan, log)
-        return {"statistics": result.statistics, "poses": []}
-    done = threading.Event()
+        return {"statistics": result.statistics}
+    poses: multiprocessing.Queue = multiprocessing.Queue()
     with NavigationLink(problem, plan, executor, port=0) as link:
-        port = link.server.port
-        readers = []
-        if condition in ("one client reading", "four clients reading"):
-            readers = [Reader(port) for _ in range(4 if condition.startswith("four") else 1)]
-        elif condition == "a client that never reads":
-            readers = [Reader(port, read=False)]
-        flooder = None
-        if condition == "a client flooding POINT bodies":
-            flooder = threading.Thread(target=flood, args=(port, done), daemon=True)
-            flooder.start()
-        time.sleep(0.3)  # the clients connected and got the models
+        clients = [
+            (target, multiprocessing.Process(target=target, args=(link.server.port, poses)))
+            for target in CLIENTS[condition]
+        ]
+        for _, process in clients:
+            process.start()
+        deadline = time.monotonic() + 10.0
+        while link.server.clients < len(clients) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.3)  # the clients got the models
         result = executor.run(plan, log)
-        done.set()
-        poses = [p for r in readers for p in r.poses] if condition.endswith("reading") else []
-        for reader in readers:
-            reader.close()
-        if flooder is not None:
-            flooder.join(timeout=2.0)
+        for target, process in clients:
+            if target is not read_client:
+                process.kill()
+    # the link closed: the readers' streams ended and each reports its arrivals
+    readers = sum(target is read_client for target, _ in clients)
+    arrivals = [pose for _ in range(readers) for pose in poses.get(timeout=30)]
+    for _, process in clients:
+        process.join(timeout=5)
     origin = read_log(log)[1]["clock_origin_s"]  # the log's time 0 on the loop's clock
-    latencies = [arrived - (origin + stamp) for arrived, stamp in poses]
-    stamps = sorted({stamp for _, stamp in poses})
+    latencies = [arrived - (origin + stamp) for arrived, stamp in arrivals]
+    stamps = sorted({stamp for _, stamp in arrivals})
     rate = (len(stamps) - 1) / (stamps[-1] - stamps[0]) if len(stamps) > 1 else float("nan")
     return {"statistics": result.statistics, "latencies": latencies, "rate_hz": rate}
 
