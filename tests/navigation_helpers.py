@@ -6,6 +6,8 @@ none of it through spm_opt's kinematics or its navigation scene."""
 from __future__ import annotations
 
 import functools
+import socket
+import threading
 import tomllib
 from pathlib import Path
 
@@ -13,6 +15,8 @@ import numpy as np
 import trimesh
 
 import spm_opt as so
+from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+from spm_opt.navigation.link import NavigationLink
 from spm_opt.problem.problem import Problem
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -69,3 +73,47 @@ def float32_close(received: np.ndarray, expected: np.ndarray, extra: float = 1e-
     """Equal within what float32 can hold: one float32 step of each value, plus ``extra``."""
     step = np.spacing(np.abs(expected).astype(np.float32)).astype(float)
     return bool(np.all(np.abs(received - expected) <= step + extra))
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+class SimulatedRun:
+    """A run of the short flap on the simulated robot, on the wall clock, with the link on
+    a free port; the test's thread is the operator."""
+
+    def __init__(self, tmp_path, start_offset_deg: float = 0.0) -> None:
+        self.problem = short_flap()
+        self.plan = so.plan(self.problem, planner="toppra")
+        start = self.plan.position(self.plan.start_time) + np.radians(start_offset_deg)
+        backend = SimulatedRobot(self.problem.robot, start_rad=start, realtime=True)
+        settings = ExecutionSettings(approach=start_offset_deg != 0.0)
+        self.executor = Executor(self.problem, backend, settings)
+        self.link = NavigationLink(self.problem, self.plan, self.executor, port=0)
+        self.log = tmp_path / "run.csv"
+        self.result = None
+        self._go = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        self._go.wait()
+        self.result = self.executor.run(self.plan, self.log)
+        self.link.finished(self.result)
+
+    def start(self) -> None:
+        """The operator starts the run (after the peer connected)."""
+        self._go.set()
+
+    def __enter__(self) -> SimulatedRun:
+        self.link.start()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self._go.set()
+        self._thread.join(timeout=120.0)
+        self.link.close()

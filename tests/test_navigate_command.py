@@ -13,27 +13,19 @@ import tomllib
 import numpy as np
 import pyigtl
 import pytest
+from igtl_peer import Peer
+from navigation_helpers import ROOT, file_registration, free_port, tool_to_ras_expected
 
 import spm_opt as so
 from spm_opt.navigation.link import PLANNED_CUT_RATE_HZ
 from spm_opt.skull.markups import read_markups
-from tests.igtl_peer import Peer
-from tests.navigation_helpers import ROOT, file_registration, tool_to_ras_expected
 
 pytestmark = pytest.mark.real_time
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
 class _Navigate:
     def __init__(self, out) -> None:
-        self.port = _free_port()
+        self.port = free_port()
         command = [sys.executable, "-m", "spm_opt.cli", "navigate", "--problem"]
         command += ["problems/skull_flap.toml", "--out", str(out), "--igtl", str(self.port)]
         self.process = subprocess.Popen(command, cwd=ROOT, stderr=subprocess.PIPE, text=True)

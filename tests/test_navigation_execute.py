@@ -14,19 +14,19 @@ import time
 import numpy as np
 import pyigtl
 import pytest
+from igtl_peer import Peer
+from navigation_helpers import (
+    ROOT,
+    SKULL_PROBLEM,
+    float32_close,
+    free_port,
+    short_flap,
+    tool_to_ras_expected,
+)
 
 import spm_opt as so
 from spm_opt.execution.log import read_log
 from spm_opt.navigation.link import POSE_RATE_HZ
-from tests.igtl_peer import Peer
-from tests.navigation_helpers import (
-    ROOT,
-    SKULL_PROBLEM,
-    float32_close,
-    short_flap,
-    tool_to_ras_expected,
-)
-from tests.test_navigate_command import _free_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.real_time]
 
@@ -48,7 +48,7 @@ def _execute(plan, log, port: int, *extra: str) -> subprocess.Popen:
 
 
 def test_the_stream_of_a_whole_run_is_its_log(tmp_path, skull_plan):
-    port, log = _free_port(), tmp_path / "run.csv"
+    port, log = free_port(), tmp_path / "run.csv"
     process = _execute(skull_plan, log, port, "--approach", "--start-deg", "1,-1")
     peer = Peer(port)
     peer.wait_for(lambda m: m.device == "RunState" and m.content[1] in ("at rest", "fault"), 180)
@@ -81,7 +81,7 @@ def test_the_stream_of_a_whole_run_is_its_log(tmp_path, skull_plan):
 
 @pytest.mark.parametrize("how", ["STOP", "SIGINT", "SIGTERM"])
 def test_stop_from_slicer_is_as_fast_as_ctrl_c(tmp_path, skull_plan, how, record_property):
-    port, log = _free_port(), tmp_path / "run.csv"
+    port, log = free_port(), tmp_path / "run.csv"
     process = _execute(skull_plan, log, port)
     peer = Peer(port)
     running = peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "running", 120)

@@ -15,9 +15,8 @@ import crcmod
 import numpy as np
 import pyigtl
 import pytest
-
-from tests.igtl_peer import Peer
-from tests.test_navigation_link import _Run
+from igtl_peer import Peer
+from navigation_helpers import SimulatedRun
 
 _ECMA = crcmod.mkCrcFun(0x142F0E1EBA9EA3693, initCrc=0, rev=False, xorOut=0)
 
@@ -156,7 +155,7 @@ def test_the_kinds_are_at_least_twenty():
 @pytest.mark.real_time
 def test_hostile_messages_leave_the_run_and_the_link_alone(tmp_path, caplog):
     caplog.set_level(logging.INFO, logger="spm_opt.navigation")
-    with _Run(tmp_path) as run:
+    with SimulatedRun(tmp_path) as run:
         port = run.link.server.port
         watcher = Peer(port)
         watcher.wait_for(lambda m: m.device == "RunState")

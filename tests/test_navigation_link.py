@@ -6,7 +6,6 @@ starts motion."""
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -14,20 +13,19 @@ import pyigtl
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-import spm_opt as so
-from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
-from spm_opt.execution.log import read_log
-from spm_opt.navigation import scene
-from spm_opt.navigation.link import POSE_RATE_HZ, NavigationLink
-from tests.igtl_peer import Peer
-from tests.navigation_helpers import (
+from igtl_peer import Peer
+from navigation_helpers import (
+    SimulatedRun,
     file_registration,
     float32_close,
-    short_flap,
     skull_problem,
     tool_to_ras_expected,
 )
+
+import spm_opt as so
+from spm_opt.execution.log import read_log
+from spm_opt.navigation import scene
+from spm_opt.navigation.link import POSE_RATE_HZ
 
 
 @settings(max_examples=40, deadline=None)
@@ -48,46 +46,9 @@ def test_a_problem_without_a_registration_is_shown_in_the_robots_frame():
     assert np.allclose(scene.image_to_robot(skull_problem()), file_registration())
 
 
-class _Run:
-    """A run of the short flap on the simulated robot, on the wall clock, with the link on
-    a free port; the test's thread is the operator."""
-
-    def __init__(self, tmp_path, start_offset_deg: float = 0.0) -> None:
-        self.problem = short_flap()
-        self.plan = so.plan(self.problem, planner="toppra")
-        start = self.plan.position(self.plan.start_time) + np.radians(start_offset_deg)
-        backend = SimulatedRobot(self.problem.robot, start_rad=start, realtime=True)
-        settings_ = ExecutionSettings(approach=start_offset_deg != 0.0)
-        self.executor = Executor(self.problem, backend, settings_)
-        self.link = NavigationLink(self.problem, self.plan, self.executor, port=0)
-        self.log = tmp_path / "run.csv"
-        self.result = None
-        self._go = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self) -> None:
-        self._go.wait()
-        self.result = self.executor.run(self.plan, self.log)
-        self.link.finished(self.result)
-
-    def start(self) -> None:
-        """The operator starts the run (after the peer connected)."""
-        self._go.set()
-
-    def __enter__(self) -> _Run:
-        self.link.start()
-        self._thread.start()
-        return self
-
-    def __exit__(self, *_exc: object) -> None:
-        self._go.set()
-        self._thread.join(timeout=120.0)
-        self.link.close()
-
-
 @pytest.mark.real_time
 def test_the_stream_is_the_logged_run(tmp_path):
-    with _Run(tmp_path, start_offset_deg=0.5) as run:
+    with SimulatedRun(tmp_path, start_offset_deg=0.5) as run:
         peer = Peer(run.link.server.port)
         peer.wait_for(lambda m: m.device == "PlannedCut")
         run.start()
@@ -131,7 +92,7 @@ def test_the_stream_is_the_logged_run(tmp_path):
 
 @pytest.mark.real_time
 def test_hold_resume_and_stop_act_as_the_keys(tmp_path):
-    with _Run(tmp_path) as run:
+    with SimulatedRun(tmp_path) as run:
         peer = Peer(run.link.server.port)
         peer.wait_for(lambda m: m.device == "RunState")
         run.start()

@@ -10,10 +10,10 @@ import time
 
 import pyigtl
 import pytest
+from igtl_peer import Peer
 
 from spm_opt.navigation import commands, igtl, server
 from spm_opt.navigation.server import NavigationServer
-from tests.igtl_peer import Peer
 
 
 def _wait(condition, timeout_s: float = 10.0) -> None:
