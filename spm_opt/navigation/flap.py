@@ -24,6 +24,7 @@ from spm_opt.base.errors import InputError
 from spm_opt.base.files import write_atomically
 from spm_opt.cut.contour import segment_durations_s
 from spm_opt.model.params import MM
+from spm_opt.model.rigid import apply
 from spm_opt.navigation.link import ReceivedFlap
 from spm_opt.planners import plan
 from spm_opt.problem.problem import Problem, load_problem
@@ -60,7 +61,7 @@ def flap_files(
             table = table.get(key, {})
         if isinstance(table.get(keys[-1]), str):
             table[keys[-1]] = os.path.relpath(folder / table[keys[-1]], out)
-    robot_points = _apply(image_to_robot_mm, flap.points_ras_mm) * MM
+    robot_points = apply(image_to_robot_mm, flap.points_ras_mm) * MM
     speed_mm_s = base.contour.length / float(np.sum(base.segment_durations)) / MM
     data.pop("landmarks", None)
     data.update(
@@ -100,10 +101,6 @@ def plan_flap(
     trajectory = plan(problem, planner=planner)
     trajectory.to_csv(out / f"{problem.name}_{planner}.csv")
     return problem, trajectory
-
-
-def _apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
-    return np.asarray(points, dtype=float) @ matrix[:3, :3].T + matrix[:3, 3]
 
 
 def _unique(names: tuple[str, ...]) -> tuple[str, ...]:

@@ -372,22 +372,19 @@ class NavigationLink:
     def _act(self, client: int, command_id: str, command: Command | CommandReply) -> CommandReply:
         if isinstance(command, CommandReply):
             return command
+        if command.verb == "PLAN":
+            return self._start_plan(client, command_id, command.argument)
         executor = self.executor
-        if command.verb in ("STOP", "HOLD", "RESUME") and executor is None:
+        if executor is None:
             return CommandReply.not_ready(command.verb, "no run to steer")
         if command.verb == "STOP":
-            assert executor is not None
             executor.stop(f"STOP from the navigation link (client {client}, CMD_{command_id})")
             return CommandReply.ok(command.verb, "safe stop requested")
         if command.verb == "HOLD":
-            assert executor is not None
             executor.hold()
             return CommandReply.ok(command.verb, "feed hold")
-        if command.verb == "RESUME":
-            assert executor is not None
-            executor.resume()
-            return CommandReply.ok(command.verb, "resumed")
-        return self._start_plan(client, command_id, command.argument)
+        executor.resume()
+        return CommandReply.ok(command.verb, "resumed")
 
     def _start_plan(self, client: int, command_id: str, planner: str) -> CommandReply:
         """PLAN on a worker thread; the reply says it started; the models and a second

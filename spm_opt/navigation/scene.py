@@ -15,6 +15,7 @@ import numpy as np
 
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM
+from spm_opt.model.rigid import apply
 from spm_opt.problem.problem import Problem
 
 
@@ -50,8 +51,7 @@ def tool_to_ras(problem: Problem, q_rad: np.ndarray, robot_to_ras_mm: np.ndarray
 
 def in_ras(points_m: np.ndarray, robot_to_ras_mm: np.ndarray) -> np.ndarray:
     """Points (N, 3) of the robot's frame, m, in RAS, mm."""
-    points_mm = np.asarray(points_m, dtype=float) / MM
-    return points_mm @ robot_to_ras_mm[:3, :3].T + robot_to_ras_mm[:3, 3]
+    return apply(robot_to_ras_mm, np.asarray(points_m, dtype=float) / MM)
 
 
 def cut_points(problem: Problem, q_rad: np.ndarray, robot_to_ras_mm: np.ndarray) -> np.ndarray:
@@ -60,14 +60,18 @@ def cut_points(problem: Problem, q_rad: np.ndarray, robot_to_ras_mm: np.ndarray)
     return in_ras(problem.contour.cut_points(directions), robot_to_ras_mm)
 
 
+def _contour_samples(problem: Problem, step_mm: float) -> np.ndarray:
+    """The contour's points every ``step_mm`` (mm) of its length, at least 8: (N, 3), m."""
+    contour = problem.contour
+    count = max(8, int(np.ceil(contour.length / (step_mm * MM))) + 1)
+    return contour.point_at(np.linspace(0.0, contour.length, count))
+
+
 def contour_points(
     problem: Problem, robot_to_ras_mm: np.ndarray, step_mm: float = 0.5
 ) -> np.ndarray:
     """The contour sampled every ``step_mm`` (mm) of its length: (N, 3) in RAS, mm."""
-    contour = problem.contour
-    count = max(8, int(np.ceil(contour.length / (step_mm * MM))) + 1)
-    s = np.linspace(0.0, contour.length, count)
-    return in_ras(contour.point_at(s), robot_to_ras_mm)
+    return in_ras(_contour_samples(problem, step_mm), robot_to_ras_mm)
 
 
 def tube_edges(
@@ -79,12 +83,8 @@ def tube_edges(
     half_width = problem.limits.contour_tolerance
     if half_width is None:
         return None
-    contour = problem.contour
-    count = max(8, int(np.ceil(contour.length / (step_mm * MM))) + 1)
-    s = np.linspace(0.0, contour.length, count)
-    points = contour.point_at(s)
-    tangents = np.gradient(points, axis=0)
-    across = np.cross(points, tangents)
+    points = _contour_samples(problem, step_mm)
+    across = np.cross(points, np.gradient(points, axis=0))
     across /= np.linalg.norm(across, axis=1, keepdims=True)
     return np.stack(
         [in_ras(points + side * half_width * across, robot_to_ras_mm) for side in (1.0, -1.0)]
