@@ -17,7 +17,17 @@ true run broke. Beside each run, the cut and the broken robot limits predicted b
 its loops are the file's (the default ωv of 150 1/s), while the plant runs the control
 table's default gains (ωv 87 and 116 1/s on that plant). ``--model ROBOT`` predicts on
 another robot file instead, such as the one ``spm-opt identify`` wrote from the plant's
-own logs (``experiments/identify_prototype.py``'s ``identified.toml``). ``--backend
+own logs (``experiments/identify_prototype.py``'s ``identified.toml``). ``--lab-robot
+ROBOT`` is the lab's whole path instead: the problems' robot is replaced by ROBOT
+(identified from the plant's logs and calibrated against it by ``spm-opt calibrate``), so
+the plans are made on it, the executor reads the encoders through its calibration, and the
+cut is predicted on it; the plant with its offsets at zero is then left out, since that
+calibration is of the plant with its offsets. With ``--lab-robot`` each plan whose
+predicted run breaks a robot limit also runs slowed at its breakaways (``spm-opt
+slow-breakaways`` on ROBOT:
+:func:`spm_opt.verify.breakaway.slowed_for_breakaways`), led, and the table gives that
+run's pace at the breakaways, its duration, its true cut, the robot limits it broke, and
+its worst joint speed, acceleration and jerk against their limits. ``--backend
 emulator`` runs the same through the real Dynamixel SDK against the emulated actuators, in
 real time (about two minutes; keep the machine otherwise idle:
 a loop that stalls for 0.2 s is a following error). Writes ``executed_cut.md``,
@@ -47,6 +57,7 @@ from spm_opt.judge.limits import ROBOT_RULES, contour_tube
 from spm_opt.judge.report import Violation
 from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.planner_style import labelled_handles
+from spm_opt.verify.breakaway import slowed_for_breakaways
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.predicted_cut import predict_cut
 
@@ -54,6 +65,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 TRACKINGS = ("none", "lead")
+SLOWED = "slowed"
+"""The tracking name of the lead on the plan slowed at its breakaways."""
 FLOOR_MM = 1e-3
 """The figure's floor for a cut's distance from the contour, mm (log scale)."""
 _COLOURS = {"none": "tab:blue", "lead": "tab:orange", "plan": "0.6"}
@@ -79,12 +92,18 @@ class Row:
     violations: int
     true_broken_limits: list[str]
     predicted_broken_limits: list[str]
+    duration_s: float
+    pace_at_breakaways: float
+    worst_share_of_limit: dict[str, float]
 
 
-def _plants(problem_name: str) -> Iterator[tuple[str, Robot]]:
+def _plants(calibrated: bool) -> Iterator[tuple[str, Robot]]:
+    """The plant, and unless the lab's robot is ``calibrated`` against it, the plant with
+    its encoder offsets at zero (a robot whose zeros are known)."""
     plant = so.load_robot(PLANT)
     yield "prototype_plant", plant
-    yield "offsets at zero", dataclasses.replace(plant, encoder_offset=np.zeros(2))
+    if not calibrated:
+        yield "offsets at zero", dataclasses.replace(plant, encoder_offset=np.zeros(2))
 
 
 @contextmanager
@@ -117,10 +136,11 @@ def run_one(
     model: Robot | None,
 ) -> Row:
     """Execute ``plan`` with ``tracking`` on ``plant`` and judge the run; its cut predicted
-    on ``model`` (default: the plant's own file)."""
+    on ``model`` (default: the plant's own file). Tracking "slowed" is the lead on the plan
+    slowed at its breakaways."""
     name = f"{problem.name}-{plan.metadata['planner']}-{plant[0].replace(' ', '_')}-{tracking}"
     log, trace = work / f"{name}.csv", work / f"{name}.npz"
-    settings = so.ExecutionSettings(tracking=tracking)
+    settings = so.ExecutionSettings(tracking="lead" if tracking == SLOWED else tracking)
     backend: Backend
     with _backend(kind, problem, plan, plant[1], trace) as backend:
         result = so.execute(plan, backend, problem, log, settings)
@@ -145,7 +165,37 @@ def run_one(
         violations=len(true.violations),
         true_broken_limits=_robot_limits(true.violations),
         predicted_broken_limits=[v.limit for v in predicted.broken_limits],
+        duration_s=plan.duration,
+        pace_at_breakaways=plan.metadata.get("slowed", {}).get("feed", 1.0),
+        worst_share_of_limit=_worst_shares(problem, log, trace),
     )
+
+
+def _worst_shares(problem: so.Problem, log: Path, trace: Path) -> dict[str, float]:
+    """The true run's worst joint speed, acceleration and jerk, each a share of its limit:
+    the judge's worst values, read by judging the run against limits nothing keeps."""
+    limits = problem.limits
+    bounds = {
+        "speed": limits.max_joint_speed,
+        "acceleration": limits.max_joint_acceleration,
+        "jerk": limits.max_joint_jerk,
+    }
+    tiny = dataclasses.replace(
+        limits, max_joint_speed=1e-9, max_joint_acceleration=1e-9, max_joint_jerk=1e-9
+    )
+    tight = dataclasses.replace(problem, limits=tiny)
+    true = evaluate_log(tight, log, trace, other_problem=True).true
+    assert true is not None
+    shares = {}
+    for kind, bound in bounds.items():
+        worst = [
+            abs(v.worst)
+            for v in true.violations
+            if v.limit.startswith("theta") and v.limit.endswith(f" {kind}")
+        ]
+        if bound is not None and worst:
+            shares[kind] = max(worst) / bound
+    return shares
 
 
 def _robot_limits(violations: list[Violation]) -> list[str]:
@@ -154,21 +204,35 @@ def _robot_limits(violations: list[Violation]) -> list[str]:
 
 
 def run(
-    kind: str, problems: list[str], planners: list[str], work: Path, model: Robot | None
+    kind: str,
+    problems: list[str],
+    planners: list[str],
+    work: Path,
+    model: Robot | None,
+    lab_robot: Robot | None = None,
 ) -> list[Row]:
     """Every planner's clean plan of each problem, on each plant, with each tracking, the
-    cut predicted on ``model`` (default: each plant's own file)."""
+    cut predicted on ``model`` (default: each plant's own file). With ``lab_robot`` the
+    problems' robot is replaced by it: it plans, calibrates the encoders and predicts."""
     rows = []
+    calibrated = lab_robot is not None and not lab_robot.calibration.is_ideal
     for problem_name in problems:
         problem = so.load_problem(ROOT / "problems" / f"{problem_name}.toml")
+        if lab_robot is not None:
+            problem = dataclasses.replace(problem, robot=lab_robot)
         for planner in planners:
             plan = so.plan(problem, planner)
             if so.evaluate(problem, plan).violations:
                 print(f"{problem_name} {planner}: not clean, left out", file=sys.stderr)
                 continue
-            for plant in _plants(problem_name):
-                for tracking in TRACKINGS:
-                    row = run_one(kind, problem, plan, plant, tracking, work, model)
+            runs = [(tracking, plan) for tracking in TRACKINGS]
+            if lab_robot is not None:
+                slowed = slowed_for_breakaways(problem, plan, model)
+                if slowed.feed < 1.0:  # else the plan's predicted run keeps the limits
+                    runs.append((SLOWED, slowed.trajectory))
+            for plant in _plants(calibrated):
+                for tracking, trajectory in runs:
+                    row = run_one(kind, problem, trajectory, plant, tracking, work, model)
                     print(
                         f"{problem_name} {planner} ({plant[0]}, {tracking}): "
                         f"{'completed' if row.completed else row.outcome}; tracking "
@@ -225,6 +289,57 @@ def table(rows: list[Row]) -> str:
         "tube (mm)",
         "robot limits broken, true (lead)",
         "robot limits broken, predicted (lead)",
+    )
+    return "\n".join(markdown_table(header, lines))
+
+
+def slowed_table(rows: list[Row]) -> str:
+    """The runs slowed at their breakaways beside the led plan's, as markdown ("" if none)."""
+    lines = []
+    for slowed in (r for r in rows if r.tracking == SLOWED):
+        lead = next(
+            r
+            for r in rows
+            if (r.problem, r.planner, r.plant, r.tracking)
+            == (slowed.problem, slowed.planner, slowed.plant, "lead")
+        )
+
+        def shares(row: Row) -> str:
+            return ", ".join(
+                f"{kind} {share:.0%}" for kind, share in row.worst_share_of_limit.items()
+            )
+
+        lines.append(
+            (
+                slowed.problem,
+                slowed.planner,
+                slowed.plant,
+                f"{slowed.pace_at_breakaways:.2f}",
+                f"{lead.duration_s:.1f} → {slowed.duration_s:.1f}",
+                "yes" if slowed.completed else "no",
+                f"{lead.true_deviation_mm:.3f} → {slowed.true_deviation_mm:.3f}",
+                f"{slowed.predicted_deviation_mm - slowed.true_deviation_mm:+.3f}",
+                ", ".join(slowed.true_broken_limits) or "none",
+                ", ".join(slowed.predicted_broken_limits) or "none",
+                shares(lead),
+                shares(slowed),
+            )
+        )
+    if not lines:
+        return ""
+    header = (
+        "problem",
+        "planner",
+        "plant",
+        "pace at the breakaways",
+        "duration, led → slowed (s)",
+        "completed (slowed)",
+        "true cut, led → slowed (mm)",
+        "predicted less true, slowed (mm)",
+        "robot limits broken, true (slowed)",
+        "robot limits broken, predicted (slowed)",
+        "worst joint speed, acceleration, jerk of their limits, true (led)",
+        "the same (slowed)",
     )
     return "\n".join(markdown_table(header, lines))
 
@@ -321,24 +436,44 @@ def main(argv: list[str] | None = None) -> int:
         help="the robot file the predictions run on (default: the plant's own file), e.g. "
         "one spm-opt identify wrote from the plant's logs",
     )
+    parser.add_argument(
+        "--lab-robot",
+        type=Path,
+        help="the lab's robot file, identified from the plant and calibrated against it: "
+        "it replaces the problems' robot, so it plans, calibrates the encoders and predicts",
+    )
     args = parser.parse_args(argv)
-    model = None if args.model is None else so.load_robot(args.model)
+    if args.lab_robot is not None and args.model is not None:
+        parser.error("--model: not with --lab-robot, which is also the prediction's model")
+    lab_robot = None if args.lab_robot is None else so.load_robot(args.lab_robot)
+    model = lab_robot if args.model is None else so.load_robot(args.model)
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as work:
         problems, planners = args.problems.split(","), args.planners.split(",")
-        rows = run(args.backend, problems, planners, Path(work), model)
+        rows = run(args.backend, problems, planners, Path(work), model, lab_robot)
     data: list[dict[str, Any]] = [dataclasses.asdict(r) for r in rows]
     (args.out / "executed_cut.json").write_text(json.dumps(data, indent=2) + "\n")
     predicted_on = "" if args.model is None else f" --model {args.model}"
+    if args.lab_robot is not None:
+        predicted_on = f" --lab-robot {args.lab_robot}"
+    model_file = args.lab_robot or args.model
     text = (
         f"# The executed cut ({args.backend})\n\n"
         "`python experiments/executed_cut.py --out DIR --backend "
-        f"{args.backend} --planners {args.planners}{predicted_on}` wrote this. Predicted on "
-        + ("each plant's own file" if model is None else f"`{args.model}`")
+        f"{args.backend} --planners {args.planners}{predicted_on}` wrote this. "
+        + ("" if args.lab_robot is None else f"Planned and calibrated on `{model_file}`. ")
+        + "Predicted on "
+        + ("each plant's own file" if model is None else f"`{model_file}`")
         + ".\n\n"
         + table(rows)
         + "\n"
     )
+    slowed = slowed_table(rows)
+    if slowed:
+        text += (
+            "\nEach plan slowed at its breakaways on the same robot file, led "
+            "(`spm-opt slow-breakaways`):\n\n" + slowed + "\n"
+        )
     (args.out / "executed_cut.md").write_text(text)
     figure(rows, args.out / "executed_cut.png")
     print(text)

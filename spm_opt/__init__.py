@@ -8,6 +8,7 @@ for brain surgery.
     table = so.compare(problem)  # every planner, one row each (a pandas DataFrame)
     predicted = so.predict_cut(problem, trajectory)  # the closed-loop model's true cut
     compensated = so.compensate(problem, trajectory).plan  # corrected for what repeats
+    slowed = so.slowed_for_breakaways(problem, trajectory).trajectory  # keeps the limits
     result = so.execute(trajectory, backend=so.SimulatedRobot(problem.robot,
                         start_rad=trajectory.position(0.0)), problem=problem, log="run.csv")
 
@@ -41,6 +42,7 @@ if TYPE_CHECKING:
     from spm_opt.problem.trajectory import Trajectory
     from spm_opt.studies.comparison import compare
     from spm_opt.studies.sweep.results import load_sweep
+    from spm_opt.verify.breakaway import slowed_for_breakaways
     from spm_opt.verify.compensation import compensate
     from spm_opt.verify.judgement import evaluate
     from spm_opt.verify.predicted_cut import predict_cut
@@ -67,6 +69,7 @@ _HOMES = {
     "load_sweep": "spm_opt.studies.sweep.results",
     "predict_cut": "spm_opt.verify.predicted_cut",
     "compensate": "spm_opt.verify.compensation",
+    "slowed_for_breakaways": "spm_opt.verify.breakaway",
     "Trajectory": "spm_opt.problem.trajectory",
 }
 """The module each lazily imported name comes from."""
@@ -118,6 +121,7 @@ __all__ = [
     "load_robot",
     "load_sweep",
     "plan",
+    "slowed_for_breakaways",
     "predict_cut",
     "read_log",
 ]

@@ -177,7 +177,11 @@ def _check_predicted_cut(
             f"plan refused: {limits} (--predicted-limits warn runs it all the same)"
         )
     if limits:
-        _LOG.warning("%s; run all the same (--predicted-limits refuse refuses it)", limits)
+        _LOG.warning(
+            "%s; run all the same (--predicted-limits refuse refuses it; spm-opt "
+            "slow-breakaways slows the plan where its joints break away)",
+            limits,
+        )
 
 
 def _predict(args: argparse.Namespace) -> None:
@@ -242,6 +246,47 @@ def _compensate(args: argparse.Namespace) -> None:
     )
     predicted = "" if compensation.predicted is None else f"; {compensation.predicted.summary()}"
     print(f"{args.out}: {kept}{predicted}")
+
+
+def _slow_breakaways(args: argparse.Namespace) -> None:
+    from spm_opt.model.params import load_robot
+    from spm_opt.problem.problem import load_problem
+    from spm_opt.problem.provenance import check_plan_made_for
+    from spm_opt.problem.trajectory import Trajectory
+    from spm_opt.verify.breakaway import HALF_WIDTH_S, slowed_for_breakaways
+
+    if args.out.suffix != ".csv":
+        raise InputError(f"--out {args.out}: expected a file name ending in .csv")
+    if not (math.isfinite(args.half_width_s) and 0.1 <= args.half_width_s <= 10.0):
+        raise InputError(
+            f"--half-width-s {args.half_width_s:g}: expected a number of seconds from 0.1 to "
+            f"10 (default {HALF_WIDTH_S:g})"
+        )
+    settings = _model_run_settings(args)
+    check_output_file(args.out, "--out")
+    problem = load_problem(args.problem)
+    trajectory = Trajectory.from_csv(args.plan)
+    check_plan_made_for(problem, trajectory, args.other_problem)
+    if "slowed" in trajectory.metadata:
+        raise InputError(f"{args.plan}: already slowed at its breakaways: slow the plan itself")
+    if "compensation" in trajectory.metadata:
+        raise InputError(f"{args.plan}: compensated: slow the plan first, then compensate it")
+    robot = None if args.robot is None else load_robot(args.robot)
+
+    def tried(feed: float, predicted: PredictedCut) -> None:
+        line = predicted.limits_line() or "keeps the robot's limits"
+        print(f"pace {feed:.2f} at the breakaways: {line}", file=sys.stderr, flush=True)
+
+    slowed = slowed_for_breakaways(
+        problem, trajectory, robot, settings, tried, half_width_s=args.half_width_s
+    )
+    slowed.trajectory.to_csv(args.out)
+    print(
+        f"{args.out}: pace {slowed.feed:.2f} at the breakaways, {slowed.trajectory.duration:.2f}"
+        f" s (the plan {trajectory.duration:.2f} s); {slowed.predicted.summary()}"
+    )
+    if not slowed.keeps_limits:
+        raise GateFailed(slowed.predicted.limits_line() or slowed.predicted.summary())
 
 
 def _model_run_settings(args: argparse.Namespace) -> ExecutionSettings:
@@ -785,6 +830,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], None]] = {
     "navigate": _navigate,
     "predict": _predict,
     "compensate": _compensate,
+    "slow-breakaways": _slow_breakaways,
     "emulate": _emulate,
     "sweep": _sweep,
     "cache": _cache,

@@ -260,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     _navigate_parser(commands)
     _predict_parser(commands)
     _compensate_parser(commands)
+    _slow_breakaways_parser(commands)
     _emulate_parser(commands)
 
     sweep = _command(
@@ -708,6 +709,40 @@ def _compensate_parser(commands: argparse._SubParsersAction) -> None:
         compensate,
         "compensate a plan made for another problem (or with no sidecar) under --problem's "
         "limits (default: refused)",
+    )
+
+
+def _slow_breakaways_parser(commands: argparse._SubParsersAction) -> None:
+    slow = _command(
+        commands,
+        "slow-breakaways",
+        "slow a plan where the robot's joints break away from rest, until its predicted run "
+        "keeps the robot's limits",
+        "A joint at rest sticks on its friction and breaks away late, faster than the plan: "
+        "the run breaks acceleration and jerk limits the plan keeps. This lowers the pace "
+        "around each instant a joint starts from rest (the start, landmark stops, "
+        "reversals) to the highest pace, within 0.05, whose predicted run on --robot keeps "
+        "every robot limit (each pace tried is a prediction; the lines go to stderr), and "
+        "writes that plan to --out with its sidecar. Exits 1 if even a pace of 0.1 does not "
+        "keep them (the slowest plan is written all the same).",
+    )
+    _plan_file(slow)
+    _problem_option(slow, "problem TOML whose robot and limits apply", paper=False)
+    _out(slow, "the slowed plan's CSV (its JSON sidecar beside it)")
+    _model_robot(slow)
+    slow.add_argument(
+        "--half-width-s",
+        type=float,
+        default=1.5,
+        metavar="S",
+        help="plan time on each side of a breakaway over which the pace is lowered, s "
+        "(default 1.5)",
+    )
+    _model_run(slow)
+    _other_problem(
+        slow,
+        "slow a plan made for another problem (or with no sidecar) under --problem's limits "
+        "(default: refused)",
     )
 
 
