@@ -545,6 +545,9 @@ def test_the_executed_cut_experiment_shows_the_cut_too(tmp_path: Path) -> None:
             violations=0,
             true_broken_limits=["theta2 jerk"],
             predicted_broken_limits=["theta2 jerk"],
+            duration_s=38.2,
+            pace_at_breakaways=1.0,
+            worst_share_of_limit={"speed": 0.3, "acceleration": 1.2, "jerk": 2.5},
         )
         for problem, tube in (("hardware", None), ("bone_flap", 0.1))
         for planner in ("toppra", "ocp-min-time")

@@ -135,7 +135,7 @@ def test_execute_says_which_robot_limit_the_predicted_run_breaks_and_refuses_whe
     assert status == 0
     said = capsys.readouterr().err
     assert "predicted run on prototype breaks theta" in said
-    assert "run all the same (--predicted-limits refuse refuses it)" in said
+    assert "run all the same (--predicted-limits refuse refuses it; spm-opt slow-breakaways" in said
     assert log.exists()
 
 

@@ -131,7 +131,14 @@ def pool_rows(tasks: list[Task], task_function: TaskFunction, workers: int) -> I
             source, limit = (suspects, 1) if alone else (queue, _IN_FLIGHT_PER_WORKER * workers)
             while source and len(in_flight) < limit:
                 task = source.popleft()
-                in_flight[pool.executor.submit(run_row, task_function, task)] = task
+                try:
+                    in_flight[pool.executor.submit(run_row, task_function, task)] = task
+                except BrokenProcessPool:  # a worker died since the last wait
+                    source.appendleft(task)
+                    break
+            if not in_flight:  # it died with nothing else in flight
+                pool.restart()
+                continue
             finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
             if any(_broke(future) for future in finished):
                 finished = wait(in_flight).done  # the others in flight failed with it
