@@ -395,6 +395,40 @@ def test_problem_path_is_a_directory(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert_nothing_written(out, tmp_path)
 
 
+@pytest.mark.parametrize(
+    ("command", "option"),
+    [
+        ("predict PLAN --problem MISSING", "--problem"),
+        ("predict PLAN --problem PROBLEM --robot MISSING", "--robot"),
+        ("predict PLAN --problem PROBLEM --robot PROBLEM", "--robot"),
+        ("compensate PLAN --problem PROBLEM --other-problem --robot MISSING --out OUT", "--robot"),
+        (
+            "slow-breakaways PLAN --problem PROBLEM --other-problem --robot MISSING --out OUT",
+            "--robot",
+        ),
+        (
+            "execute PLAN --problem PROBLEM --backend sim --plant-robot MISSING --log OUT",
+            "--plant-robot",
+        ),
+        ("calibrate --problem MISSING --out OUT", "--problem"),
+        ("identify PLAN --problem MISSING --out OUT", "--problem"),
+    ],
+)
+def test_a_bad_file_names_its_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str, option: str
+) -> None:
+    """A missing or wrong file given by an option: the error line starts with the option."""
+    problem = write_problem(tmp_path / "inputs")
+    plan = tmp_path / "inputs" / "plan.csv"
+    plan.write_text(HEADER + GOOD_ROWS, encoding="utf-8")
+    argv = command.split()
+    out = tmp_path / "out" / ("robot.toml" if argv[0] in ("calibrate", "identify") else "out.csv")
+    names = {"PLAN": plan, "PROBLEM": problem, "MISSING": tmp_path / "missing.toml", "OUT": out}
+    status, shown = run_cli([str(names.get(part, part)) for part in argv])
+    assert_one_error(status, capsys.readouterr().err, (f"error: {option} <tmp>/",), tmp_path, shown)
+    assert not out.exists() and not out.parent.exists()
+
+
 def test_out_not_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     problem = write_problem(tmp_path)
     out = tmp_path / "out" / "plan.txt"

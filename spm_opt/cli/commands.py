@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 from spm_opt.base.errors import InputError
 from spm_opt.base.output_paths import check_output_directory, check_output_file
@@ -28,6 +28,15 @@ if TYPE_CHECKING:
     from spm_opt.verify.predicted_cut import PredictedCut
 
 _LOG = logging.getLogger("spm_opt.cli")  # the command line's logger, whichever module logs
+_Loaded = TypeVar("_Loaded")
+
+
+def _from_option(option: str, load: Callable[[Path], _Loaded], path: Path) -> _Loaded:
+    """``load(path)``; an input error in the file names ``option``, the flag that gave it."""
+    try:
+        return load(path)
+    except InputError as error:
+        raise InputError(f"{option} {error}") from None
 
 
 def _pair(text: str, option: str, kind: type) -> tuple:
@@ -68,10 +77,17 @@ def _execute(args: argparse.Namespace) -> None:
             f"--trace {args.trace}: expected a file name ending in .npz, with --backend sim "
             "(the emulator's own --trace records the plant behind the Dynamixel backend)"
         )
+    if args.plant_robot is not None and args.backend != "sim":
+        raise InputError("--plant-robot: only with --backend sim (the real robot is the plant)")
     check_output_file(args.log, "--log")
     if args.trace is not None:
         check_output_file(args.trace, "--trace")
-    problem = load_problem(args.problem)
+    problem = _from_option("--problem", load_problem, args.problem)
+    plant = (
+        None
+        if args.plant_robot is None
+        else _from_option("--plant-robot", load_robot, args.plant_robot)
+    )
     trajectory = Trajectory.from_csv(args.plan)
     _check_predicted_cut(problem, trajectory, settings, args)
     keys = _keys_terminal(args.interactive)
@@ -79,16 +95,12 @@ def _execute(args: argparse.Namespace) -> None:
         start = trajectory.position(trajectory.start_time)
         if args.start_deg is not None:
             start = np.radians(_pair(args.start_deg, "--start-deg", float))
-        plant = None if args.plant_robot is None else load_robot(args.plant_robot)
         realtime = args.realtime or keys is not None or args.igtl is not None  # the wall clock
         backend = SimulatedRobot(
             problem.robot, start_rad=start, realtime=realtime, plant_robot=plant
         )
     else:
         from spm_opt.execution.dynamixel import DynamixelRobot
-
-        if args.plant_robot is not None:
-            raise InputError("--plant-robot: only with --backend sim (the real robot is the plant)")
 
         if args.port is None:
             raise InputError("--port: required with --backend dynamixel (e.g. /dev/ttyUSB0)")
@@ -125,7 +137,7 @@ def _navigate(args: argparse.Namespace) -> None:
     from spm_opt.navigation.link import NavigationLink, ReceivedFlap
     from spm_opt.problem.problem import load_problem
 
-    problem = load_problem(args.problem)
+    problem = _from_option("--problem", load_problem, args.problem)
     check_output_directory(args.out, "--out")
 
     def plan(
@@ -191,8 +203,8 @@ def _predict(args: argparse.Namespace) -> None:
     from spm_opt.verify.predicted_cut import predict_cut
 
     settings = _model_run_settings(args)
-    problem = load_problem(args.problem)
-    robot = None if args.robot is None else load_robot(args.robot)
+    problem = _from_option("--problem", load_problem, args.problem)
+    robot = None if args.robot is None else _from_option("--robot", load_robot, args.robot)
     trajectory = Trajectory.from_csv(args.plan)
     if args.highest_feed:
         predicted = _report_highest_feed(problem, trajectory, robot, settings)
@@ -225,13 +237,13 @@ def _compensate(args: argparse.Namespace) -> None:
         raise InputError("--robot: not with --dry-run (the dry run's robot is the model)")
     settings = _model_run_settings(args)
     check_output_file(args.out, "--out")
-    problem = load_problem(args.problem)
+    problem = _from_option("--problem", load_problem, args.problem)
     trajectory = Trajectory.from_csv(args.plan)
     check_plan_made_for(problem, trajectory, args.other_problem)
     if args.dry_run is not None:
         compensation = compensate_from_run(problem, trajectory, args.dry_run)
     else:
-        robot = None if args.robot is None else load_robot(args.robot)
+        robot = None if args.robot is None else _from_option("--robot", load_robot, args.robot)
         compensation = compensate(problem, trajectory, robot, settings, args.iterations)
     for k, iteration in enumerate(compensation.iterations):
         cut = "" if iteration.deviation_mm is None else f"cut {iteration.deviation_mm:.3f} mm, "
@@ -264,14 +276,14 @@ def _slow_breakaways(args: argparse.Namespace) -> None:
         )
     settings = _model_run_settings(args)
     check_output_file(args.out, "--out")
-    problem = load_problem(args.problem)
+    problem = _from_option("--problem", load_problem, args.problem)
     trajectory = Trajectory.from_csv(args.plan)
     check_plan_made_for(problem, trajectory, args.other_problem)
     if "slowed" in trajectory.metadata:
         raise InputError(f"{args.plan}: already slowed at its breakaways: slow the plan itself")
     if "compensation" in trajectory.metadata:
         raise InputError(f"{args.plan}: compensated: slow the plan first, then compensate it")
-    robot = None if args.robot is None else load_robot(args.robot)
+    robot = None if args.robot is None else _from_option("--robot", load_robot, args.robot)
 
     def tried(feed: float, predicted: PredictedCut) -> None:
         line = predicted.limits_line() or "keeps the robot's limits"
@@ -410,9 +422,9 @@ def _emulate(args: argparse.Namespace) -> None:
     from spm_opt.problem.problem import load_problem
 
     if args.plant_robot is not None:
-        robot = load_robot(args.plant_robot)
+        robot = _from_option("--plant-robot", load_robot, args.plant_robot)
     else:
-        robot = load_problem(args.problem).robot
+        robot = _from_option("--problem", load_problem, args.problem).robot
     ids = _pair(args.ids, "--ids", int)
     start = np.radians(_pair(args.start_deg, "--start-deg", float))
     faults = parse_faults(args.fault)
@@ -495,7 +507,9 @@ def _plan_within_prediction(problem: Problem, planner: str, robot_path: str) -> 
     from spm_opt.model.params import load_robot
     from spm_opt.verify.predicted_reserve import plan_within_prediction
 
-    robot = load_robot(robot_path) if robot_path else None
+    robot = (
+        _from_option("--predicted-reserve", load_robot, Path(robot_path)) if robot_path else None
+    )
     kept = plan_within_prediction(problem, planner, robot)
     print(f"first plan: {kept.first.summary()}")
     if kept.replanned:
@@ -562,7 +576,11 @@ def _review(args: argparse.Namespace) -> None:
     if args.predict is not None:
         from spm_opt.model.params import load_robot
 
-        predict_on = problem.robot if args.predict == "" else load_robot(Path(args.predict))
+        predict_on = (
+            problem.robot
+            if args.predict == ""
+            else _from_option("--predict", load_robot, Path(args.predict))
+        )
     given = review_inputs(problem, args.plan, args.log, args.other_problem, args.trace, predict_on)
     skull = problem.skull if problem.skull is not None else Skull(surface=problem.surface)
     files = {
@@ -604,7 +622,7 @@ def _identify(args: argparse.Namespace) -> None:
         raise InputError(f"--out {args.out}: expected a robot file name ending in .toml")
     check_holdout(args.holdout)
     check_output_file(args.out, "--out")
-    problem = load_problem(args.problem)
+    problem = _from_option("--problem", load_problem, args.problem)
     check_log_rows(args.logs)
     decimation, stretches, single_read = args.decimation, [], []
     for path in args.logs:
@@ -709,7 +727,7 @@ def _calibrate(args: argparse.Namespace) -> None:
     for option, path in (("--out", args.out), ("--write-plan", args.write_plan)):
         if path is not None:
             check_output_file(path, option)
-    problem = load_problem(args.problem)
+    problem = _from_option("--problem", load_problem, args.problem)
     settings = CalibrationSettings(
         poses=args.poses,
         held_out=args.held_out,
@@ -733,7 +751,11 @@ def _calibrate(args: argparse.Namespace) -> None:
         tracker = f"{args.tracker.name}"
         data = args.log.read_bytes() + args.tracker.read_bytes()
     else:
-        plant = problem.robot if args.plant_robot is None else load_robot(args.plant_robot)
+        plant = (
+            problem.robot
+            if args.plant_robot is None
+            else _from_option("--plant-robot", load_robot, args.plant_robot)
+        )
         simulated = SimulatedTracker(
             marker_distance_mm=args.marker_distance_mm,
             fle_mm=args.tracker_fle_mm,
