@@ -159,15 +159,18 @@ def test_position_moves_toward_the_sync_written_goal(bus):
     assert ph.read1ByteTxRx(port, 1, TORQUE_ENABLE) == (1, COMM_SUCCESS, 0)
     trace = []
     start = time.monotonic()
-    while time.monotonic() - start < 0.35:
+    nearly_there = 0.05 * np.abs(goal)
+    while time.monotonic() - start < 10.0:  # ends on arrival; the deadline only on a failure
         sync_write(port, ph, goal)
         result, positions = sync_read_positions(port, ph)
         assert result == COMM_SUCCESS
         trace.append(positions)
+        if np.all(np.abs(np.subtract(positions, goal)) < nearly_there):
+            break
     trace = np.array(trace)
-    assert len(trace) > 20
+    assert len(trace) > 5  # a motion, not one jump
     error = np.abs(trace - goal)
-    assert np.all(error[-1] < 0.05 * np.abs(goal))  # nearly there
+    assert np.all(error[-1] < nearly_there)
     assert np.all(np.diff(error, axis=0) <= 0.01 * np.abs(goal))  # never moving away
     assert signed(ph.read4ByteTxRx(port, 2, GOAL_POSITION)[0]) == -15_000
     np.testing.assert_allclose(emulator.plant.goal_position_rad, [0.3477, -0.2608], atol=1e-3)
