@@ -39,6 +39,7 @@ from spm_opt.identify.robot_file import robot_file_text
 from spm_opt.judge.limits import ROBOT_RULES, contour_tube
 from spm_opt.model.params import MM
 from spm_opt.studies.identified_plants import identify_plant
+from spm_opt.verify.breakaway import slowed_for_breakaways
 from spm_opt.verify.compensation import compensate
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.plant_family import PlantFamily
@@ -173,6 +174,23 @@ def main() -> None:
                 compute_s = time.perf_counter() - started
                 compensated = true_run(problem, compensation.plan, plant, work, f"{name}-comp")
                 kept = compensation.predicted
+                slowed = None
+                if kept.broken_limits:  # slow where the joints break away, then compensate
+                    started = time.perf_counter()
+                    slowing = slowed_for_breakaways(problem, plan, model)
+                    if slowing.feed < 1.0:
+                        learned = compensate(
+                            problem, slowing.trajectory, model, iterations=args.iterations
+                        )
+                        slowed = {
+                            "feed": slowing.feed,
+                            "duration_s": slowing.trajectory.duration,
+                            "predicted_mm": learned.predicted.deviation_mm,
+                            "predicted_inside": learned.predicted.inside,
+                            "predicted_broken": robot_rules_broken(learned.predicted),
+                            "compute_s": time.perf_counter() - started,
+                            "run": true_run(problem, learned.plan, plant, work, f"{name}-slowed"),
+                        }
                 slower = None
                 if not kept.inside:  # the lab's next step: the lead plan at the highest feed
                     found = highest_feed_inside(problem, plan, model)
@@ -205,6 +223,7 @@ def main() -> None:
                     "predicted_compensated_inside": kept.inside,
                     "predicted_compensated_broken": robot_rules_broken(kept),
                     "compensated": compensated,
+                    "slowed": slowed,
                     "highest_feed": slower,
                     "compensation_compute_s": compute_s,
                     "plan_duration_s": plan.duration,
@@ -225,22 +244,31 @@ def main() -> None:
         write_tables(args, rows)
 
 
-def lab_run(row: dict) -> tuple[float | None, dict | None, float | None, list[str]]:
+def lab_run(row: dict) -> tuple[str, dict | None, float | None, list[str]]:
     """The run a lab makes after the prediction: the compensated stream where its predicted
-    cut is inside, else the lead plan at the highest feed predicted inside. Returns (the
-    feed, the run, its predicted cut (mm), the robot's rules its prediction breaks); the
-    run None where no feed is predicted inside."""
+    cut is inside and its predicted run keeps the robot's limits; else the plan slowed at its
+    breakaways and compensated, where its predicted cut is inside; else the compensated
+    stream where its predicted cut is inside; else the lead plan at the highest feed
+    predicted inside. Returns (which run: "compensated", "slowed" or "feed", the run, its
+    predicted cut (mm), the robot's rules its prediction breaks); the run None where no
+    feed is predicted inside."""
+    compensated = (
+        "compensated",
+        row["compensated"],
+        row["predicted_compensated_mm"],
+        row["predicted_compensated_broken"],
+    )
+    slowed = row.get("slowed")
+    if row["predicted_compensated_inside"] and not row["predicted_compensated_broken"]:
+        return compensated
+    if slowed is not None and slowed["predicted_inside"]:
+        return "slowed", slowed["run"], slowed["predicted_mm"], slowed["predicted_broken"]
     if row["predicted_compensated_inside"]:
-        return (
-            1.0,
-            row["compensated"],
-            row["predicted_compensated_mm"],
-            row["predicted_compensated_broken"],
-        )
+        return compensated
     slower = row["highest_feed"]
     if slower is None:
-        return None, None, None, []
-    return slower["feed"], slower["run"], slower["predicted_mm"], slower["predicted_broken"]
+        return "feed", None, None, []
+    return "feed", slower["run"], slower["predicted_mm"], slower["predicted_broken"]
 
 
 def limit_lines(rows: list[dict]) -> list[str]:
@@ -272,40 +300,64 @@ def limit_lines(rows: list[dict]) -> list[str]:
 def summary_lines(rows: list[dict]) -> list[str]:
     """What the rows of one speed say, a line each."""
     runs = [lab_run(r)[:3] for r in rows]
+    slowed = [s for _, s in _with_slowed(rows)]
     errors = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
     errors += [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
-    errors += [  # the lab's run, where it is not the compensated run counted above
-        abs(predicted - run["true_mm"]) for feed, run, predicted in runs if run and feed != 1.0
+    errors += [abs(s["predicted_mm"] - s["run"]["true_mm"]) for s in slowed]
+    errors += [
+        abs(r["highest_feed"]["predicted_mm"] - r["highest_feed"]["run"]["true_mm"])
+        for r in rows
+        if r["highest_feed"]
     ]
     inside = [
         run is not None and run["completed"] and run["true_mm"] <= r["tube_mm"]
         for r, (_, run, _) in zip(rows, runs, strict=True)
     ]
-    slower = [(r, feed) for r, (feed, _, _) in zip(rows, runs, strict=True) if feed != 1.0]
+    outside = [r for r in rows if not r["predicted_compensated_inside"]]
+    chosen = [kind for kind, _, _ in runs]
     broken: dict[str, int] = {}
     for _, run, _ in runs:
         for rule in run["true_broken"] if run else []:
             broken[rule] = broken.get(rule, 0) + 1
     compute = [r["compensation_compute_s"] for r in rows]
+    slowing = (
+        f"- Slowed at the breakaways (where the compensated stream's predicted run breaks a "
+        f"robot limit): {len(slowed)} plans, pace there {min(s['feed'] for s in slowed):.2f}–"
+        f"{max(s['feed'] for s in slowed):.2f}, "
+        f"{min(s['run']['true_mm'] for s in slowed):.3f}–"
+        f"{max(s['run']['true_mm'] for s in slowed):.3f} mm true; the plans "
+        f"{min(s['duration_s'] / r['plan_duration_s'] for r, s in _with_slowed(rows)):.2f}–"
+        f"{max(s['duration_s'] / r['plan_duration_s'] for r, s in _with_slowed(rows)):.2f} "
+        f"times as long; slowing and compensating took median "
+        f"{np.median([s['compute_s'] for s in slowed]):.0f} s, at most "
+        f"{max(s['compute_s'] for s in slowed):.0f} s a plan."
+        if slowed
+        else "- Slowed at the breakaways: none."
+        if any("slowed" in r for r in rows)
+        else "- Slowed at the breakaways: not tried (rows written before the study slowed plans)."
+    )
     return [
         f"- Runs: {len(rows)}; true cut inside the tube: "
         f"{sum(r['lead']['true_mm'] <= r['tube_mm'] for r in rows)} with the lead alone, "
         f"{sum(r['compensated']['true_mm'] <= r['tube_mm'] for r in rows)} compensated; "
-        f"the lab's run (compensated where predicted inside, else the highest feed predicted "
-        f"inside): {sum(inside)} of {len(rows)} completed inside.",
-        f"- Predicted outside even compensated, before any run: {len(slower)}"
+        f"the lab's run ({chosen.count('compensated')} compensated, "
+        f"{chosen.count('slowed')} slowed at the breakaways and compensated, "
+        f"{chosen.count('feed')} at the highest feed predicted inside): "
+        f"{sum(inside)} of {len(rows)} completed inside.",
+        f"- Predicted outside even compensated, before any run: {len(outside)}"
         + (
             " ("
             + "; ".join(
                 f"plant {r['plant']} {r['flap'].removeprefix('craniotomy_')} {r['planner']}: "
-                + (f"feed {feed:.2f}" if feed is not None else "no feed")
-                for r, feed in slower
+                + (f"feed {r['highest_feed']['feed']:.2f}" if r["highest_feed"] else "no feed")
+                for r in outside
             )
             + ")."
-            if slower
+            if outside
             else "."
         ),
-        f"- Prediction's error over every run (lead, compensated, slower): worst "
+        slowing,
+        f"- Prediction's error over every run (lead, compensated, slowed, slower): worst "
         f"{max(errors):.4f} mm, median {np.median(errors):.4f}; over 0.01 mm on "
         f"{sum(e > 0.01 for e in errors)} of {len(errors)}.",
         "- Rules the lab's true runs break: "
@@ -315,6 +367,11 @@ def summary_lines(rows: list[dict]) -> list[str]:
         f"- Compensation's compute: median {np.median(compute):.0f} s, at most "
         f"{max(compute):.0f} s a plan; the compensated plans are as long as their plans.",
     ]
+
+
+def _with_slowed(rows: list[dict]) -> list[tuple[dict, dict]]:
+    """The rows with a slowed run, each with it."""
+    return [(r, r["slowed"]) for r in rows if r.get("slowed")]
 
 
 def runs_by_speed(rows: list[dict]) -> str:
@@ -345,15 +402,16 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         "predicted (compensated), mm",
         "true (compensated), mm",
         "corrections",
+        "slowed at the breakaways: pace, s, predicted / true, mm",
         "highest feed predicted inside: predicted / true, mm",
         "completed",
-        "broken on the lab's true run",
+        "the lab's run: broken on its true run",
         "robot limits its prediction breaks",
     ]
 
     def cells(r: dict) -> list[str]:
-        slower = r["highest_feed"]
-        feed, run, _, predicted = lab_run(r)
+        slower, slowed = r["highest_feed"], r.get("slowed")
+        kind, run, _, predicted = lab_run(r)
         return [
             str(r["plant"]),
             r["flap"].removeprefix("craniotomy_"),
@@ -363,6 +421,10 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
             f"{r['predicted_compensated_mm']:.3f}",
             f"{r['compensated']['true_mm']:.3f}",
             f"{r['corrections']} (×{r['scale']:g})",
+            ("—" if "slowed" in r else "not tried")
+            if slowed is None
+            else f"{slowed['feed']:.2f}, {r['plan_duration_s']:.1f} → {slowed['duration_s']:.1f}: "
+            f"{slowed['predicted_mm']:.3f} / {slowed['run']['true_mm']:.3f}",
             "—"
             if r["predicted_compensated_inside"]
             else (
@@ -373,9 +435,13 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
             ),
             " / ".join(
                 "yes" if run_["completed"] else "no"
-                for run_ in (r["lead"], r["compensated"], *([run] if feed != 1.0 and run else []))
+                for run_ in (
+                    r["lead"],
+                    r["compensated"],
+                    *([run] if kind != "compensated" and run else []),
+                )
             ),
-            ", ".join(run["true_broken"]) if run else "(not run)",
+            f"{kind}: " + (", ".join(run["true_broken"]) or "none") if run else "(not run)",
             ", ".join(predicted) if run else "",
         ]
 
@@ -400,10 +466,13 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         f"{args.fit_seconds:g} s excitation (its velocity loops from the log's replay); the "
         "prediction and the compensation on the identified file; the true cut from the "
         "plant's true state, the plant running its own loops. Plant numbers are the family's "
-        "draws from seed 2026. Where the compensated stream's predicted cut leaves the tube, "
+        "draws from seed 2026. Where the compensated stream's predicted run breaks a robot "
+        "limit, the plan is slowed where its joints break away (`spm-opt slow-breakaways`) "
+        "and compensated again; the lab runs it where its predicted cut is inside. Where the "
+        "compensated stream's predicted cut leaves the tube, and no slowed stream's is inside, "
         "the lab's run is the lead plan at the highest feed predicted inside "
-        "(`spm-opt predict --highest-feed`). Completed: lead / compensated / slower.\n\n"
-        + "\n".join(sections)
+        "(`spm-opt predict --highest-feed`). Completed: lead / compensated / the lab's run "
+        "where it is neither.\n\n" + "\n".join(sections)
     )
     (args.out / "compensated_cut.md").write_text(text, encoding="utf-8")
     (args.out / "compensated_cut.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
@@ -425,14 +494,28 @@ def figure(rows: list[dict]) -> Figure:
             marker=marker,
             label=kind,
         )
-    slower = [r["highest_feed"] for r in rows if r.get("highest_feed")]
-    left.scatter(
-        [s["predicted_mm"] for s in slower],
-        [s["run"]["true_mm"] for s in slower],
-        c="tab:blue",
-        marker="^",
-        label="lead at the highest feed predicted inside",
+    others = (
+        (
+            [s for _, s in _with_slowed(rows)],
+            "tab:red",
+            "v",
+            "slowed at the breakaways, compensated",
+        ),
+        (
+            [r["highest_feed"] for r in rows if r.get("highest_feed")],
+            "tab:blue",
+            "^",
+            "lead at the highest feed predicted inside",
+        ),
     )
+    for runs, colour, marker, label in others:
+        left.scatter(
+            [s["predicted_mm"] for s in runs],
+            [s["run"]["true_mm"] for s in runs],
+            c=colour,
+            marker=marker,
+            label=label,
+        )
     top = max(max(r["lead"]["true_mm"], r["predicted_lead_mm"]) for r in rows) * 1.1
     left.plot([0, top], [0, top], color="0.5", lw=1, label="predicted = true")
     left.plot([0, top], [0.01, top + 0.01], color="0.5", lw=1, ls=":", label="±0.01 mm")

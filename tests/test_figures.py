@@ -579,6 +579,12 @@ def test_the_compensated_cut_figure_keeps_the_rules(tmp_path: Path) -> None:
             "lead": {"true_mm": 0.052 + 0.01 * plant},
             "predicted_compensated_mm": 0.03 + 0.01 * plant,
             "compensated": {"true_mm": 0.031 + 0.01 * plant},
+            "slowed": {"predicted_mm": 0.02 + 0.01 * plant, "run": {"true_mm": 0.021}}
+            if planner == "toppra"
+            else None,
+            "highest_feed": {"predicted_mm": 0.11, "run": {"true_mm": 0.112}}
+            if plant == 2 and planner == "ocp-min-time"
+            else None,
         }
         for plant in (1, 2)
         for flap in ("craniotomy_bone_flap", "craniotomy_five_landmarks")
