@@ -320,22 +320,6 @@ def summary_lines(rows: list[dict]) -> list[str]:
         for rule in run["true_broken"] if run else []:
             broken[rule] = broken.get(rule, 0) + 1
     compute = [r["compensation_compute_s"] for r in rows]
-    slowing = (
-        f"- Slowed at the breakaways (where the compensated stream's predicted run breaks a "
-        f"robot limit): {len(slowed)} plans, pace there {min(s['feed'] for s in slowed):.2f}–"
-        f"{max(s['feed'] for s in slowed):.2f}, "
-        f"{min(s['run']['true_mm'] for s in slowed):.3f}–"
-        f"{max(s['run']['true_mm'] for s in slowed):.3f} mm true; the plans "
-        f"{min(s['duration_s'] / r['plan_duration_s'] for r, s in _with_slowed(rows)):.2f}–"
-        f"{max(s['duration_s'] / r['plan_duration_s'] for r, s in _with_slowed(rows)):.2f} "
-        f"times as long; slowing and compensating took median "
-        f"{np.median([s['compute_s'] for s in slowed]):.0f} s, at most "
-        f"{max(s['compute_s'] for s in slowed):.0f} s a plan."
-        if slowed
-        else "- Slowed at the breakaways: none."
-        if any("slowed" in r for r in rows)
-        else "- Slowed at the breakaways: not tried (rows written before the study slowed plans)."
-    )
     return [
         f"- Runs: {len(rows)}; true cut inside the tube: "
         f"{sum(r['lead']['true_mm'] <= r['tube_mm'] for r in rows)} with the lead alone, "
@@ -356,7 +340,7 @@ def summary_lines(rows: list[dict]) -> list[str]:
             if outside
             else "."
         ),
-        slowing,
+        _slowing_line(rows),
         f"- Prediction's error over every run (lead, compensated, slowed, slower): worst "
         f"{max(errors):.4f} mm, median {np.median(errors):.4f}; over 0.01 mm on "
         f"{sum(e > 0.01 for e in errors)} of {len(errors)}.",
@@ -372,6 +356,26 @@ def summary_lines(rows: list[dict]) -> list[str]:
 def _with_slowed(rows: list[dict]) -> list[tuple[dict, dict]]:
     """The rows with a slowed run, each with it."""
     return [(r, r["slowed"]) for r in rows if r.get("slowed")]
+
+
+def _slowing_line(rows: list[dict]) -> str:
+    """What slowing at the breakaways did to the rows of one speed, one line."""
+    pairs = _with_slowed(rows)
+    if not pairs:
+        if any("slowed" in r for r in rows):
+            return "- Slowed at the breakaways: none."
+        return "- Slowed at the breakaways: not tried (rows written before the study slowed plans)."
+    paces = [s["feed"] for _, s in pairs]
+    true = [s["run"]["true_mm"] for _, s in pairs]
+    longer = [s["duration_s"] / r["plan_duration_s"] for r, s in pairs]
+    compute = [s["compute_s"] for _, s in pairs]
+    return (
+        f"- Slowed at the breakaways (where the compensated stream's predicted run breaks a "
+        f"robot limit): {len(pairs)} plans, pace there {min(paces):.2f}–{max(paces):.2f}, "
+        f"{min(true):.3f}–{max(true):.3f} mm true; the plans {min(longer):.2f}–"
+        f"{max(longer):.2f} times as long; slowing and compensating took median "
+        f"{np.median(compute):.0f} s, at most {max(compute):.0f} s a plan."
+    )
 
 
 def runs_by_speed(rows: list[dict]) -> str:
