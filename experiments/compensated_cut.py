@@ -364,7 +364,10 @@ def _slowing_line(rows: list[dict]) -> str:
     if not pairs:
         if any("slowed" in r for r in rows):
             return "- Slowed at the breakaways: none."
-        return "- Slowed at the breakaways: not tried (rows written before the study slowed plans)."
+        return (
+            "- Slowed at the breakaways: not tried (rows written by an earlier version, before "
+            "the study slowed plans and before the executor held the plan's start)."
+        )
     paces = [s["feed"] for _, s in pairs]
     true = [s["run"]["true_mm"] for _, s in pairs]
     longer = [s["duration_s"] / r["plan_duration_s"] for r, s in pairs]

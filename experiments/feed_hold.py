@@ -66,19 +66,27 @@ and robot), which the executor allows only when asked."""
 
 
 class _Operator(SimulatedRobot):
-    """The simulated robot with an operator who holds at ``hold_s`` and resumes later
-    (times on the backend's clock, which starts at 0)."""
+    """The simulated robot with an operator who holds ``hold_s`` after the plan's first
+    cycle and resumes later (times on the backend's clock)."""
 
     executor: Executor
     hold_s: float
+    _plan_start: float | None = None
+    _last_read: float = 0.0
+    _held: bool = False
 
     def read(self) -> so.execution.Measurement:
         measurement = super().read()
-        now = self.clock.now()
-        if now >= self.hold_s and not getattr(self, "_held", False):
+        now, status = self.clock.now(), self.executor.status
+        if self._plan_start is None and status is not None and status.phase == "plan":
+            self._plan_start = self._last_read  # the plan's first cycle read there
+        self._last_read = now
+        if self._plan_start is None:
+            return measurement
+        if now >= self._plan_start + self.hold_s and not self._held:
             self._held = True
             self.executor.hold()
-        if now >= self.hold_s + RESUME_AFTER_S and self._held:
+        if now >= self._plan_start + self.hold_s + RESUME_AFTER_S and self._held:
             self.executor.resume()
         return measurement
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_bad_inputs import assert_one_error, run_cli
 from test_predicted_cut import FLAP, PLANT
@@ -50,12 +50,13 @@ def test_the_breakaways_are_the_start_the_reversals_and_each_joint_leaving_creep
 
 @settings(max_examples=20, deadline=None)
 @given(feed=st.floats(0.1, 1.0), half_width_s=st.floats(0.2, 1.5), at=st.floats(1.0, 7.0))
+@example(feed=0.5, half_width_s=1.5, at=1.0)  # a dip that begins before the plan does
 def test_the_slowed_plan_is_the_same_path_at_the_lower_pace_there(feed, half_width_s, at):
     plan = swing()
     slowed = slowed_near(plan, np.array([at]), feed, half_width_s)
-    # the same ends and landmarks, later by what the dip adds (∫ (1/r − 1) dτ, written
-    # here by the trapezoid rule on its own grid)
-    tau = np.linspace(at - half_width_s, at + half_width_s, 40001)
+    # the same ends and landmarks, later by what the dip adds within the plan (∫ (1/r − 1)
+    # dτ, written here by the trapezoid rule on its own grid)
+    tau = np.linspace(max(at - half_width_s, 0.0), min(at + half_width_s, 8.0), 40001)
     x = np.clip((tau - at) / half_width_s, -1, 1)
     r = 1 - (1 - feed) * ((1 + np.cos(np.pi * x)) / 2) ** 2
     added = np.trapezoid(1 / r - 1, tau)

@@ -202,7 +202,8 @@ def assert_every_sample_up_to_the_fault(
     assert table["time_s"].iloc[fault] == pytest.approx(seen, abs=1e-6)
     assert result.reason.replace(",", ";") in table["status"].iloc[fault]
     phases = table["phase"].tolist()
-    assert set(phases[:fault]) == {"plan"} and phases[-1] == "hold"
+    assert set(phases[:fault]) == {"ready", "plan"} and phases[fault - 1] == "plan"
+    assert phases.index("plan") == phases.count("ready") and phases[-1] == "hold"
     assert set(phases[fault + 1 :]) <= {"stop", "hold"}
     if injected_at is not None:
         assert seen - table["time_s"].iloc[0] >= injected_at - PERIOD_S

@@ -43,24 +43,33 @@ PLAN_PATH_RATE_HZ = 10_000.0
 
 class ScriptedRobot(SimulatedRobot):
     """The simulated robot, with an operator acting at set times of the backend's clock
-    (simulated time runs faster than any thread could follow it)."""
+    after the plan's first cycle (simulated time runs faster than any thread could follow
+    it); ``executor`` is the one running it."""
 
     script: list[tuple[float, Callable[[], object]]]
+    executor: Executor
+    _plan_start: float | None = None
+    _last_read: float = 0.0
 
     def read(self) -> so.execution.Measurement:
         measurement = super().read()
-        now = self.clock.now()
-        while self.script and now >= self.script[0][0]:
+        now, status = self.clock.now(), self.executor.status
+        if self._plan_start is None and status is not None and status.phase == "plan":
+            self._plan_start = self._last_read  # the plan's first cycle read there
+        self._last_read = now
+        while self._plan_start is not None and self.script:
+            if now < self._plan_start + self.script[0][0]:
+                break
             _, action = self.script.pop(0)
             action()
         return measurement
 
 
 def scripted_run(problem, plan, tmp_path, script, **settings):
-    """Run ``plan`` with ``script`` [(s after the start, executor → action)]; returns
-    the result, the log, its header and the plant's true trace (its arrays)."""
+    """Run ``plan`` with ``script`` [(s after the plan's first cycle, executor → action)];
+    returns the result, the log, its header and the plant's true trace (its arrays)."""
     backend = ScriptedRobot(problem.robot, start_rad=plan.position(plan.start_time))
-    executor = Executor(problem, backend, ExecutionSettings(**settings))
+    executor = backend.executor = Executor(problem, backend, ExecutionSettings(**settings))
     backend.script = [(t, (lambda act=act: act(executor))) for t, act in script]
     result = executor.run(plan, tmp_path / "run.csv")
     table, header = read_log(tmp_path / "run.csv")
@@ -188,14 +197,15 @@ def test_three_holds_and_two_overrides_complete_the_contour_on_the_path(
 
 
 class Operator(threading.Thread):
-    """Acts on an executor from another thread, at wall-clock times after its first cycle."""
+    """Acts on an executor from another thread, at wall-clock times after the plan's first
+    cycle."""
 
     def __init__(self, executor: Executor, script) -> None:
         super().__init__(daemon=True)
         self._executor, self._script = executor, script
 
     def run(self) -> None:
-        while self._executor.status is None:
+        while self._executor.status is None or self._executor.status.phase != "plan":
             time.sleep(0.001)
         start = time.monotonic() - self._executor.status.time_s
         for at, act in self._script:

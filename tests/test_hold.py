@@ -166,12 +166,12 @@ def test_fifty_holds_on_a_time_optimal_plan_stop_on_the_path_within_the_bound(
 # ------------------------------------------------------------------ holds on the robot
 def run(problem, plan, tmp_path, script, plant=None, **settings):
     """Run ``plan`` on the simulated robot (``plant`` its plant, default the planning
-    model) with ``script`` [(s on the backend's clock, executor → action)]; the result,
-    the log, its header and the plant's true trace on the log's clock."""
+    model) with ``script`` [(s after the plan's first cycle, executor → action)]; the
+    result, the log, its header and the plant's true trace on the log's clock."""
     backend = ScriptedRobot(
         problem.robot, start_rad=plan.position(plan.start_time), plant_robot=plant
     )
-    executor = Executor(problem, backend, ExecutionSettings(**settings))
+    executor = backend.executor = Executor(problem, backend, ExecutionSettings(**settings))
     backend.script = [(t, (lambda act=act: act(executor))) for t, act in script]
     result = executor.run(plan, tmp_path / "run.csv")
     table, header = read_log(tmp_path / "run.csv")

@@ -72,8 +72,9 @@ def test_the_stream_of_a_whole_run_is_its_log(tmp_path, skull_plan):
 
     # the states are the run's phases in order; the log's, mapped the same way
     phases = table["phase"].to_numpy()
-    order = {"approach": "approach", "plan": "running", "settle": "settling"}
-    logged = [order[p] for i, p in enumerate(phases) if i == 0 or p != phases[i - 1]]
+    order = {"approach": "approach", "ready": "approach", "plan": "running", "settle": "settling"}
+    mapped = [order[p] for p in phases]
+    logged = [s for i, s in enumerate(mapped) if i == 0 or s != mapped[i - 1]]
     states = peer.states()
     assert states[-1] == "at rest" and header["completed"]
     assert [s for s in states if s not in ("ready", "at rest")] == logged

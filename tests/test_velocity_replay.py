@@ -15,7 +15,13 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 import spm_opt as so
-from spm_opt.execution import ExecutionSettings, PlantSettings, SimulatedRobot, execute
+from spm_opt.execution import (
+    ExecutionSettings,
+    PlantSettings,
+    SimulatedRobot,
+    execute,
+    read_log,
+)
 from spm_opt.execution.log import header_path
 from spm_opt.execution.plant import gains_for_rates, loop_rates
 from spm_opt.identify.velocity_replay import replay_bandwidth
@@ -107,6 +113,11 @@ def test_a_robot_that_never_moves_keeps_the_prior(excitation, tmp_path):
     prior = problem.robot.actuator.velocity_loop_bandwidth_per_s
     assert replay.robot(problem.robot).actuator.velocity_loop_bandwidth_per_s == prior
     assert "kept" in replay.summary()
+    # the hold at the plan's start sets the model's state; only the plan on is judged
+    table, _ = read_log(log)
+    assert table["phase"].iloc[0] == "ready"
+    begun = table.loc[table["phase"] == "plan", "time_s"].iloc[0]
+    assert replay.seconds == pytest.approx(table["time_s"].iloc[-1] - begun)
 
 
 class LateWrites(SimulatedRobot):

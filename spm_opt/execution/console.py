@@ -83,9 +83,12 @@ def status_line(status: RunStatus, progress: ContourProgress) -> str:
 
 def _doing(status: RunStatus) -> str:
     if status.phase != "plan":
-        return {"approach": "approaching", "settle": "settling", "stop": "stopping"}.get(
-            status.phase, "holding after the stop"
-        )
+        return {
+            "approach": "approaching",
+            "ready": "settling at the start",
+            "settle": "settling",
+            "stop": "stopping",
+        }.get(status.phase, "holding after the stop")
     if status.status != "ok":
         return status.status
     if status.held:

@@ -3,8 +3,10 @@
 Pre-flight (:mod:`spm_opt.execution.preflight`), the plan must have been made for this
 problem, start and end at rest, and keep every limit that judges the robot. The robot must
 be where the plan starts, or, on request, is first brought there by a jerk-limited ruckig
-approach. A stop asked for before or during :meth:`Executor.run` is honoured (and forgotten
-when the run ends): before connecting, the run ends with nothing moved or written
+approach; either way it then holds the start until rest is proven (or ``settle_s``
+passes), so that the plan starts with the load taken up by the loop. A stop asked for
+before or during :meth:`Executor.run` is honoured (and forgotten when the run ends):
+before connecting, the run ends with nothing moved or written
 (:class:`~spm_opt.base.errors.RunInterrupted`); after, in the first control cycle, before any
 goal of the plan goes out. Then a fixed-rate loop on the backend's clock reads both
 actuators, checks them, writes the next goal positions and logs the sample (queued in
@@ -15,17 +17,17 @@ the planned path; a hold where the plan leaves no room for a stop on the path
 (:mod:`spm_opt.judge.hold_room`) is the safe stop below, at once (the log's feed events say "no
 room: safe stop"). On a hardware error, a following error beyond the tolerance, a run of
 cycles with a failed read or write longer than the retry budget, a log write that failed or
-stalls (in the approach, the plan and the settle; during the stop and the hold the samples
-wait in memory), SIGINT or SIGTERM, any other exception raised by the backend or in the
-loop, the robot is brought to rest by a jerk-limited ruckig stop that starts, in the cycle
-that saw the fault, from the last goal the actuators received (so the goal stream stays
-continuous: starting from the measured position would make the goal jump back by the
-following error, and a goal whose write failed never reached them). It then holds there
-until rest is proven: every sample over a window below the rest speed and each joint's
-position within a few encoder pulses. The log's header reports how long the stop took and
-how far each joint moved. A run is a success only when it completed and rest was proven at
-its end (:attr:`ExecutionResult.succeeded`). The log's times start at 0 at the loop's
-start; the header's ``clock_origin_s`` is that moment on the backend's clock.
+stalls (in the approach, the hold at the start, the plan and the settle; during the stop
+and the hold the samples wait in memory), SIGINT or SIGTERM, any other exception raised by
+the backend or in the loop, the robot is brought to rest by a jerk-limited ruckig stop that
+starts, in the cycle that saw the fault, from the last goal the actuators received (so the
+goal stream stays continuous: starting from the measured position would make the goal jump
+back by the following error, and a goal whose write failed never reached them). It then
+holds there until rest is proven: every sample over a window below the rest speed and each
+joint's position within a few encoder pulses. The log's header reports how long the stop
+took and how far each joint moved. A run is a success only when it completed and rest was
+proven at its end (:attr:`ExecutionResult.succeeded`). The log's times start at 0 at the
+loop's start; the header's ``clock_origin_s`` is that moment on the backend's clock.
 
 This module holds the run's lifecycle and its phases along the plan; a cycle's I/O and
 checks are :mod:`spm_opt.execution.cycle`'s, the approach and the stop's ruckig moves
@@ -273,6 +275,7 @@ class Executor:
         try:
             if approach is not None:
                 self._follow("approach", approach)
+            self._ready(trajectory.position(trajectory.start_time))
             self._follow_plan(trajectory)
             end = trajectory.position(trajectory.end_time)
             at_rest, why = self._settle(end)
@@ -326,14 +329,15 @@ class Executor:
 
     def _longest_run_s(self, trajectory: Trajectory, approach: Segment | None) -> float:
         """How long the run may log for, s, if nobody holds the feed: the approach, the
-        plan at its starting feed, the settle, a stop from the speed limit and the hold."""
+        ready hold, the plan at its starting feed, the settle, a stop from the speed limit
+        and the hold."""
         limits = self.settings.joint_limits(self.problem)
         feed = min(self.settings.feed, self._requests.ceiling)
         stop = limits.speed / limits.acceleration + limits.acceleration / limits.jerk
         return (
             (approach.duration if approach is not None else 0.0)
             + trajectory.duration / feed
-            + self.settings.settle_s
+            + 2 * self.settings.settle_s
             + stop
             + self.settings.hold_s
         )
@@ -430,6 +434,27 @@ class Executor:
                 "feed_target": pace.target,
             }
         )
+
+    def _ready(self, start: np.ndarray) -> None:
+        """Hold the plan's start, checked, until rest is confirmed or ``settle_s`` passes,
+        so that the plan begins with the load taken up by the loop (a robot whose torque
+        was just enabled, or that just arrived, sags under gravity first: on the family's
+        plants that start broke θ1's jerk limit in the plan's first 0.1 s, whatever the
+        plan). Not proven at rest, the plan starts anyway, its following error checked."""
+        loop = self._loop
+        at_rest = (start, np.zeros(2), np.zeros(2))
+        confirmed, window = hold_until_rest(
+            loop,
+            "ready",
+            start,
+            self.settings.settle_s,
+            self.settings,
+            self.problem.robot.actuator,
+            lambda cycle: loop.check(cycle, at_rest, self._stop_requested),
+            checked=True,
+        )
+        if confirmed is None:
+            _LOG.info("rest at the start not proven: %s; the plan starts", window.why())
 
     def _settle(self, target: np.ndarray) -> tuple[bool, str]:
         """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;

@@ -84,7 +84,8 @@ class RunStatus:
     time_s : float, s
         The log's time (since the loop's start).
     phase : str
-        "approach", "plan", "settle", "stop" or "hold" (after a stop).
+        "approach", "ready" (the hold at the plan's start), "plan", "settle", "stop" or
+        "hold" (after a stop).
     plan_time_s, plan_duration_s : float, s
         How far along the plan the goal is (τ), and the plan's length.
     feed, feed_target : float

@@ -48,7 +48,8 @@ class ExecutionSettings:
     stop_acceleration_rad_s2, stop_jerk_rad_s3 : float
         Limits of the stop and of the approach (defaults when the problem has none).
     settle_s : float, s
-        After the plan's end, longest time allowed for the joints to come to rest.
+        At the plan's start and after its end, longest time allowed for the joints to come
+        to rest.
     rest_speed_rad_s : float, rad/s
         Measured joint speed below which a sample counts as at rest.
     rest_window_s : float, s

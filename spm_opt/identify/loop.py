@@ -14,7 +14,8 @@ ahead:
 α and β functions of Kp, ωv and T. Each side divided by its sum (equal: at rest q = g), the
 difference is the logged goal less the one the model needs for the measured positions (as
 T → 0, g − q − q̇/Kp − q̈/(Kp ωv): the executor's lead), rad. Kp and ωv of each joint
-minimise its sum of squares over every period of the logs, all phases
+minimise its sum of squares over every period of the logs, all phases but the hold at the
+plan's start (:func:`~spm_opt.identify.samples.held_at_the_start`)
 (``scipy.optimize.least_squares`` over their logarithms, from the prior's, within the range
 a robot file accepts, :data:`~spm_opt.model.actuator.LOOP_RATE_RANGE_PER_S`), goals and
 positions both through the same zero-phase low-pass filter first (4th-order Butterworth
@@ -101,6 +102,7 @@ from spm_opt.identify.samples import (
     FILTER_ORDER,
     check_log_rows,
     correlation_factor,
+    held_at_the_start,
     log_values,
     named,
 )
@@ -471,7 +473,7 @@ def _runs(path: Path) -> list[_Run]:
     goal = log_values(table, ("goal_theta1_rad", "goal_theta2_rad"), path)
     position = log_values(table, ("position_theta1_rad", "position_theta2_rad"), path)
     complete = np.isfinite(t) & np.all(np.isfinite(goal), axis=1)
-    complete &= np.all(np.isfinite(position), axis=1)
+    complete &= np.all(np.isfinite(position), axis=1) & ~held_at_the_start(table)
     runs = []
     for chunk in np.split(np.arange(len(t)), np.flatnonzero(np.diff(complete.astype(int))) + 1):
         if complete[chunk[0]] and len(chunk) > 1:

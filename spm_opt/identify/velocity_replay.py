@@ -12,12 +12,14 @@ first reading is and plays the log at the instants its header's ``cycle_timing``
 (0 on the simulated robot; through the SDK, the read's middle and the goal write some
 milliseconds after each row's time): it reads the model's Present Velocity when the row's
 read sampled and gives it the row's goal when the write returned. Each joint's ωv
-minimises the RMS of the model's velocity less the logged one over the logs' first
-:data:`REPLAY_SECONDS`: a grid of :data:`GRID_PER_S` for both joints at once (a joint's
-velocity hardly depends on the other's ωv), then :data:`REFINEMENTS` halvings of the step
-about each joint's best. An estimate is carried only where the grid's best lies inside it
-and the grid leaves at least :data:`DISTINCT` times the estimate's residual, and
-:data:`DISTINCT_UNITS` velocity units more, on each side of it.
+minimises the RMS of the model's velocity less the logged one over the first
+:data:`REPLAY_SECONDS` of the logs' plans (a log is replayed from its first reading, through
+the approach and the hold at the plan's start, which only set the model's state): a grid
+of :data:`GRID_PER_S` for both joints at once (a joint's velocity hardly depends on the
+other's ωv), then :data:`REFINEMENTS` halvings of the step about each joint's best. An
+estimate is carried only where the grid's best lies inside it and the grid leaves at least
+:data:`DISTINCT` times the estimate's residual, and :data:`DISTINCT_UNITS` velocity units
+more, on each side of it.
 
 Measured on family plants (:mod:`spm_opt.verify.plant_family`, seed 2026) identified from
 30 s of ``problems/identification.toml``'s excitation: the plant's own model replays its log
@@ -25,8 +27,9 @@ to 0.18 mrad/s (the velocity unit is 0.21 mrad/s). On the tenth plant (ωv 290 a
 the grid left 46.6 and 50.8 mrad/s at 40 1/s, 5.5 and 7.2 at 320 and 29.3 and 36.7 at 640;
 the estimate, 281 and 269 1/s, 1.9 and 1.4 mrad/s, against 23.0 and 16.7 at the prior's 134
 and 178. Over the ten plants of ``experiments/compensated_cut.py`` the estimate was within
-8 % of the plant's ωv, and the cut predicted on the identified file within 0.0022 mm of the
-true cut on every run (up to 0.036 mm with the prior's ωv). The model's Velocity I Gain is
+8 % of the plant's ωv, and the cut predicted on the identified file within 0.0031 mm of the
+true cut on 162 of 164 runs at 4 mm/s (up to 0.036 mm with the prior's ωv; the two others
+began where a joint stuck off the plan's start). The model's Velocity I Gain is
 the firmware's default, which a robot file does not hold: on a plant with twice it, ωv came
 out 108 and 269 1/s against 100 and 250 (``tests/test_velocity_replay.py``).
 """
@@ -174,7 +177,7 @@ def replay_bandwidth(paths: list[Path], robot: Robot) -> BandwidthReplay:
         if left <= 0.0:
             break
         logs.append(_replayed_log(Path(path), left))
-        left -= float(logs[-1].time_s[-1] - logs[-1].time_s[0])
+        left -= logs[-1].judged_s
     grid = np.array(GRID_PER_S)
     residuals = np.array([_residual(logs, robot, (w, w)) for w in grid])  # (grid, 2)
     best = np.argmin(residuals, axis=0)
@@ -212,14 +215,15 @@ def replay_bandwidth(paths: list[Path], robot: Robot) -> BandwidthReplay:
         prior_bandwidth_per_s=prior,
         prior_residual_rad_s=_residual(logs, robot, (float(prior[0]), float(prior[1]))),
         reason=(reason[0], reason[1]),
-        seconds=sum(float(log.time_s[-1] - log.time_s[0]) for log in logs),
+        seconds=sum(log.judged_s for log in logs),
     )
 
 
 @dataclass(frozen=True)
 class _Log:
     """A log's replayed rows: time (n,), s; positions, velocities (n, 2), rad and rad/s
-    (NaN where not read); goals (n, 2), rad (NaN where none was written); when after each
+    (NaN where not read); goals (n, 2), rad (NaN where none was written); whether each
+    row's velocity is judged (n,), bool (from the plan's first row on); when after each
     row's time the read sampled and the goal was written (the header's ``cycle_timing``,
     0 where absent), s."""
 
@@ -227,19 +231,27 @@ class _Log:
     position: np.ndarray
     velocity: np.ndarray
     goal: np.ndarray
+    judged: np.ndarray
     read_s: float
     written_s: float
 
+    @property
+    def judged_s(self) -> float:
+        """How long the judged rows last, s."""
+        return float(self.time_s[-1] - self.time_s[self.judged][0])
+
 
 def _replayed_log(path: Path, seconds: float) -> _Log:
-    """The first ``seconds`` of a log from its first row with a reading."""
+    """A log from its first row with a reading to ``seconds`` after its plan's first row
+    (its first reading, if later or if it has no plan phase)."""
     table, header = read_execution_log(path)
     time_s = log_values(table, ("time_s",), path)[:, 0]
     position = log_values(table, _POSITIONS, path)
     read = np.flatnonzero(np.isfinite(time_s) & np.all(np.isfinite(position), axis=1))
     if len(read) < 2:
         raise InputError(f"log {path}: fewer than two rows with both joints' positions")
-    start = time_s[read[0]]
+    plan = np.flatnonzero(table["phase"].astype(str).to_numpy() == "plan")
+    start = max(time_s[read[0]], time_s[plan[0]]) if len(plan) else time_s[read[0]]
     rows = np.arange(len(time_s)) >= read[0]
     rows &= np.isfinite(time_s) & (time_s <= start + seconds)
     velocity, goal = log_values(table, _VELOCITIES, path), log_values(table, _GOALS, path)
@@ -249,6 +261,7 @@ def _replayed_log(path: Path, seconds: float) -> _Log:
         position[rows],
         velocity[rows],
         goal[rows],
+        time_s[rows] >= start,
         float(timing.get("read_s", 0.0)),
         float(timing.get("goal_written_s", 0.0)),
     )
@@ -277,7 +290,7 @@ def _residual(logs: list[_Log], robot: Robot, bandwidth: tuple[float, float]) ->
             if np.all(np.isfinite(log.goal[k])):
                 plant.goal_position_rad[:] = actuator.angle(actuator.pulses(log.goal[k]))
         error = replayed - log.velocity
-        seen = np.isfinite(error)
+        seen = np.isfinite(error) & log.judged[:, None]
         squares += np.sum(np.where(seen, error, 0.0) ** 2, axis=0)
         counted += np.sum(seen, axis=0)
     return np.sqrt(squares / np.maximum(counted, 1))

@@ -71,11 +71,11 @@ class ReceivedFlap:
 
 
 def run_state(status: RunStatus | None) -> str:
-    """The state a run's status shows: ready (no cycle yet), approach, running, held,
-    settling or stopping."""
+    """The state a run's status shows: ready (no cycle yet), approach (also the hold at
+    the plan's start), running, held, settling or stopping."""
     if status is None:
         return "ready"
-    if status.phase == "approach":
+    if status.phase in ("approach", "ready"):
         return "approach"
     if status.phase == "plan":
         return "held" if status.held and status.feed == 0.0 else "running"

@@ -6,9 +6,10 @@ losses, rotor inertia and encoder zeros, under two Dynamixel controllers with th
 loops (Kp and ωv, as the control table's whole gains give them:
 :func:`~spm_opt.execution.plant.gains_for_rates`; the Velocity I Gain the table's default),
 their Velocity and Torque Limits, and the sensors' resolution. The executor drives it with
-the run's settings (rate, lead, starting feed) on a virtual clock, from the plan's start,
-and :func:`~spm_opt.verify.executed_cut.evaluate_log` judges the plant's true state against
-the whole contour tolerance, as it judges a run's trace, and by the robot's limits
+the run's settings (rate, lead, starting feed) on a virtual clock, from the plan's start
+(held there until at rest, as a run is), and
+:func:`~spm_opt.verify.executed_cut.evaluate_log` judges the plant's true state against the
+whole contour tolerance, as it judges a run's trace, and by the robot's limits
 (:attr:`PredictedCut.broken_limits`: where a joint sticks on its friction and breaks away,
 the run breaks acceleration and jerk limits its plan keeps). A robot file identified from
 the robot's own logs (``spm-opt identify``) makes the model that robot.
@@ -30,6 +31,7 @@ import numpy as np
 
 from spm_opt.cut.cut_checks import stretch
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot
+from spm_opt.execution.backend import CLOCK_EPSILON_S
 from spm_opt.execution.feed import FEED_STEP
 from spm_opt.execution.log import read_execution_log
 from spm_opt.execution.plant import closed_loop_settings
@@ -146,11 +148,14 @@ def predict_cut(
     assert report is not None  # a trace was given
     tube = contour_tube(problem, executed=True)
     state = backend.trace.arrays(header["clock_origin_s"])
+    planned = table.loc[table["phase"].astype(str) == "plan", "time_s"]
+    begun = planned.iloc[0] if len(planned) else -np.inf
+    judged = state["time_s"] >= begun - CLOCK_EPSILON_S  # as the judge: from the plan on
     return PredictedCut(
         report=report,
         robot=robot.name,
         tube_mm=None if tube is None else tube / MM,
-        farthest_at=_farthest_at(problem, state["position_rad"]),
+        farthest_at=_farthest_at(problem, state["position_rad"][judged]),
         time_s=state["time_s"],
         angles_rad=state["position_rad"],
         followed=followed_in_log(table, state),
