@@ -351,7 +351,7 @@ def test_refused_writes_stop_from_the_last_goal_the_actuators_received(
     # it): then the plant holds that goal, the plan's at that cycle
     held = trace["goal_rad"][_row_at(trace, seen)]
     pulse = 2 * np.pi / hardware_problem.robot.actuator.pulses_per_rev
-    at = table["time_s"].iloc[first] - table["time_s"].iloc[0]
+    at = table["plan_time_s"].iloc[first]  # the plan's time of the goal that failed
     lead = Lead.for_actuator(hardware_problem.robot.actuator, PERIOD_S, SETTINGS.tracking)
     attempted = lead.goal(move.position(at), move.velocity(at), move.acceleration(at))
     candidates = np.array([table[GOALS].iloc[first - 1], attempted])

@@ -197,8 +197,8 @@ def test_three_holds_and_two_overrides_complete_the_contour_on_the_path(
 
 
 class Operator(threading.Thread):
-    """Acts on an executor from another thread, at wall-clock times after the plan's first
-    cycle."""
+    """Acts on an executor from another thread, at wall-clock times after its first cycle,
+    once the plan has begun."""
 
     def __init__(self, executor: Executor, script) -> None:
         super().__init__(daemon=True)

@@ -62,7 +62,7 @@ from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace
 from spm_opt.execution.log import LogWriter, Write
 from spm_opt.execution.moves import Segment, approach_move
 from spm_opt.execution.realtime import frozen_heap, raised_priority
-from spm_opt.execution.rest import FeedHoldWatch, hold_until_rest
+from spm_opt.execution.rest import FeedHoldWatch, RestWindow, hold_until_rest
 from spm_opt.execution.results import ExecutionResult, LoopStatistics, RunStatus
 from spm_opt.execution.settings import ExecutionSettings
 from spm_opt.execution.stop import safe_stop
@@ -436,46 +436,40 @@ class Executor:
         )
 
     def _ready(self, start: np.ndarray) -> None:
-        """Hold the plan's start, checked, until rest is confirmed or ``settle_s`` passes,
-        so that the plan begins with the load taken up by the loop (a robot whose torque
-        was just enabled, or that just arrived, sags under gravity first: on the family's
-        plants that start broke θ1's jerk limit in the plan's first 0.1 s, whatever the
-        plan). Not proven at rest, the plan starts anyway, its following error checked."""
+        """Hold the plan's start until rest is confirmed or ``settle_s`` passes, so that the
+        plan begins with the load taken up by the loop (a robot whose torque was just
+        enabled, or that just arrived, sags under gravity first: on the family's plants
+        that start broke θ1's jerk limit in the plan's first 0.1 s, whatever the plan). Not
+        proven at rest, the plan starts anyway, its following error checked."""
+        confirmed, window = self._hold_checked("ready", start)
+        if confirmed is None:
+            _LOG.info("rest at the start not proven: %s; the plan starts", window.why())
+
+    def _settle(self, target: np.ndarray) -> tuple[bool, str]:
+        """Hold the plan's end until rest is confirmed or ``settle_s`` passes; (True,
+        "confirmed") if confirmed, else (False, "not proven within …: why")."""
+        confirmed, window = self._hold_checked("settle", target)
+        if confirmed is not None:
+            return True, "confirmed"
+        why = f"not proven within the {self.settings.settle_s:g} s settle: {window.why()}"
+        _LOG.info("rest %s", why)
+        return False, why
+
+    def _hold_checked(self, phase: str, target: np.ndarray) -> tuple[float | None, RestWindow]:
+        """Hold ``target`` (rad) in ``phase``, every cycle checked against rest there,
+        until rest is confirmed or ``settle_s`` passes (:func:`hold_until_rest`)."""
         loop = self._loop
-        at_rest = (start, np.zeros(2), np.zeros(2))
-        confirmed, window = hold_until_rest(
+        at_rest = (target, np.zeros(2), np.zeros(2))
+        return hold_until_rest(
             loop,
-            "ready",
-            start,
+            phase,
+            target,
             self.settings.settle_s,
             self.settings,
             self.problem.robot.actuator,
             lambda cycle: loop.check(cycle, at_rest, self._stop_requested),
             checked=True,
         )
-        if confirmed is None:
-            _LOG.info("rest at the start not proven: %s; the plan starts", window.why())
-
-    def _settle(self, target: np.ndarray) -> tuple[bool, str]:
-        """Hold the plan's end, checked, until rest is confirmed or ``settle_s`` passes;
-        (True, "confirmed") if confirmed, else (False, "not proven within …: why")."""
-        loop, settle_s = self._loop, self.settings.settle_s
-        at_rest = (target, np.zeros(2), np.zeros(2))
-        confirmed, window = hold_until_rest(
-            loop,
-            "settle",
-            target,
-            settle_s,
-            self.settings,
-            self.problem.robot.actuator,
-            lambda cycle: loop.check(cycle, at_rest, self._stop_requested),
-            checked=True,
-        )
-        if confirmed is not None:
-            return True, "confirmed"
-        why = f"not proven within the {settle_s:g} s settle: {window.why()}"
-        _LOG.info("rest %s", why)
-        return False, why
 
     @contextmanager
     def _signals(self) -> Iterator[None]:
