@@ -258,7 +258,7 @@ def lab_run(row: dict) -> tuple[str, dict | None, float | None, list[str]]:
         row["predicted_compensated_mm"],
         row["predicted_compensated_broken"],
     )
-    slowed = row.get("slowed")
+    slowed = row["slowed"]
     if row["predicted_compensated_inside"] and not row["predicted_compensated_broken"]:
         return compensated
     if slowed is not None and slowed["predicted_inside"]:
@@ -355,19 +355,14 @@ def summary_lines(rows: list[dict]) -> list[str]:
 
 def _with_slowed(rows: list[dict]) -> list[tuple[dict, dict]]:
     """The rows with a slowed run, each with it."""
-    return [(r, r["slowed"]) for r in rows if r.get("slowed")]
+    return [(r, r["slowed"]) for r in rows if r["slowed"]]
 
 
 def _slowing_line(rows: list[dict]) -> str:
     """What slowing at the breakaways did to the rows of one speed, one line."""
     pairs = _with_slowed(rows)
     if not pairs:
-        if any("slowed" in r for r in rows):
-            return "- Slowed at the breakaways: none."
-        return (
-            "- Slowed at the breakaways: not tried (rows written by an earlier version, before "
-            "the study slowed plans and before the executor held the plan's start)."
-        )
+        return "- Slowed at the breakaways: none."
     paces = [s["feed"] for _, s in pairs]
     true = [s["run"]["true_mm"] for _, s in pairs]
     longer = [s["duration_s"] / r["plan_duration_s"] for r, s in pairs]
@@ -417,7 +412,7 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
     ]
 
     def cells(r: dict) -> list[str]:
-        slower, slowed = r["highest_feed"], r.get("slowed")
+        slower, slowed = r["highest_feed"], r["slowed"]
         kind, run, _, predicted = lab_run(r)
         return [
             str(r["plant"]),
@@ -428,7 +423,7 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
             f"{r['predicted_compensated_mm']:.3f}",
             f"{r['compensated']['true_mm']:.3f}",
             f"{r['corrections']} (×{r['scale']:g})",
-            ("—" if "slowed" in r else "not tried")
+            "—"
             if slowed is None
             else f"{slowed['feed']:.2f}, {r['plan_duration_s']:.1f} → {slowed['duration_s']:.1f}: "
             f"{slowed['predicted_mm']:.3f} / {slowed['run']['true_mm']:.3f}",

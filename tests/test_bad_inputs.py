@@ -732,11 +732,12 @@ BONE_FLAP = ROOT / "problems" / "craniotomy_bone_flap.toml"
 
 @pytest.fixture(scope="module")
 def executed(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A folder with a run of the hardware problem's toppra plan on the simulated robot:
-    run.csv, run.json and the plant's true state, true.npz."""
+    """A folder with a run of the hardware problem's toppra plan, slowed at its breakaways
+    (at the full pace the loops' answer to each goal step takes θ1 past its speed limit),
+    on the simulated robot: run.csv, run.json and the plant's true state, true.npz."""
     folder = tmp_path_factory.mktemp("executed")
     problem = so.load_problem(HARDWARE_PROBLEM)
-    plan = so.plan(problem, "toppra")
+    plan = so.slowed_for_breakaways(problem, so.plan(problem, "toppra")).trajectory
     backend = so.SimulatedRobot(problem.robot, start_rad=plan.position(0.0))
     so.execute(plan, backend, problem, folder / "run.csv")
     backend.trace.save(folder / "true.npz")

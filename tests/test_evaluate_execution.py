@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 from test_evaluate import meridian_problem
@@ -24,7 +24,12 @@ from spm_opt.execution.log import LogWriter
 from spm_opt.execution.plant import StateTrace
 from spm_opt.model import dynamics
 from spm_opt.model.params import DEG, MM
-from spm_opt.verify.executed_cut import ExecutionReport, evaluate_log, is_execution_log
+from spm_opt.verify.executed_cut import (
+    ExecutionReport,
+    _peaks_between,
+    evaluate_log,
+    is_execution_log,
+)
 from spm_opt.verify.log_estimates import smoothed_derivatives
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -342,20 +347,29 @@ def test_evaluate_takes_a_log_or_a_trajectory_by_its_path(meridian, hardware_pro
 @pytest.fixture(scope="module")
 def simulated_run(hardware_toppra, tmp_path_factory):
     """The toppra plan run on the simulated robot driving the plant robot: the log, its
-    true state and the reports."""
+    true state, the reports and each joint's largest speed over every step of the plant
+    (1 ms; the log reads it every 10 ms), recorded here."""
     problem, plan = hardware_toppra
     folder = tmp_path_factory.mktemp("simulated")
     plant = so.load_robot(ROOT / "problems" / "robots" / "prototype_plant.toml")
     backend = so.SimulatedRobot(problem.robot, start_rad=plan.position(0.0), plant_robot=plant)
+    fastest = np.zeros(2)
+    step = backend.plant._step
+
+    def recorded_step() -> None:
+        step()
+        np.maximum(fastest, np.abs(backend.plant.velocity_rad_s), out=fastest)
+
+    backend.plant._step = recorded_step
     result = so.execute(plan, backend, problem, folder / "run.csv", so.ExecutionSettings())
     assert result.completed
     backend.trace.save(folder / "true.npz")
     reports = evaluate_log(problem, folder / "run.csv", folder / "true.npz")
-    return folder, reports
+    return folder, reports, fastest
 
 
 def test_a_simulated_run_is_judged_measured_and_true(simulated_run):
-    folder, reports = simulated_run
+    folder, reports, _ = simulated_run
     measured, true = reports.measured, reports.true
     assert measured.completed and measured.angles == "measured" and true.angles == "true"
     assert "contour deviation" not in [v.rule for v in measured.violations + true.violations]
@@ -376,13 +390,54 @@ def test_a_simulated_run_is_judged_measured_and_true(simulated_run):
     assert "without the encoder offsets" in true.to_markdown()
 
 
+def test_the_true_speed_is_judged_between_the_reads(simulated_run):
+    """Each goal is a step the loops answer within the 10 ms period: the plant's speed
+    peaks between two reads. The true cut's joint speed is the largest over every step of
+    the plant (recorded by the fixture, not by the trace), above any read's; at the full
+    pace of a plan at its speed limit, θ1's peak breaks the limit, which the reads alone
+    would not show."""
+    folder, reports, fastest = simulated_run
+    true = reports.true
+    assert true.peak_joint_speed_rad_s == pytest.approx(fastest.tolist(), rel=1e-12)
+    table, header = so.read_log(folder / "run.csv")
+    trace = StateTrace.load(folder / "true.npz", header["clock_origin_s"])
+    at_reads = np.max(np.abs(trace["velocity_rad_s"]), axis=0)
+    assert np.all(fastest > at_reads)
+    limit = true.joint_speed_limit_rad_s
+    assert at_reads[0] < limit < fastest[0]
+    assert [v.limit for v in true.violations] == ["theta1 speed"]
+
+
+@settings(max_examples=200, deadline=None)
+@example(samples=[199], rows=[209], seed=0)  # a sample one period before the first row
+@given(
+    st.lists(st.integers(0, 400), min_size=1, max_size=60, unique=True),
+    st.lists(st.integers(0, 400), min_size=1, max_size=20, unique=True),
+    st.integers(0, 2**32 - 1),
+)
+def test_the_peak_over_each_row_s_span_is_every_sample_s_in_it(samples, rows, seed):
+    """Each row's peak is the largest of the trace samples after the row before (the
+    first: after one period before it), up to and at the row, by a loop over the rows;
+    0 where none falls in the span. Times on a 1 ms grid, as the plant steps."""
+    times, at = np.sort(samples) * 1e-3, np.sort(rows) * 1e-3
+    peaks = np.random.default_rng(seed).uniform(0.0, 2.0, (len(times), 2))
+    period = 0.01
+    expected = np.zeros((len(at), 2))
+    for k, row in enumerate(at):
+        after = at[k - 1] if k else row - period
+        inside = (times > after) & (times <= row)
+        if inside.any():
+            expected[k] = peaks[inside].max(axis=0)
+    np.testing.assert_array_equal(_peaks_between(times, peaks, at, period), expected)
+
+
 def test_a_joint_displaced_mid_run_shows_a_contour_violation_then(
     simulated_run, hardware_toppra, tmp_path
 ):
     """θ1 moved by 1° over 0.9–1.2 s in a copy of the log: the contour deviation is broken
     at the time the distance computed here from a dense polyline is largest."""
     problem, _ = hardware_toppra
-    folder, _ = simulated_run
+    folder, _, _ = simulated_run
     table = pd.read_csv(folder / "run.csv")
     window = (table["time_s"] >= 0.9) & (table["time_s"] <= 1.2)
     table.loc[window, "position_theta1_rad"] += 1.0 * DEG
@@ -408,12 +463,13 @@ def test_the_command_line_prints_the_measured_and_the_true_cut(
     from spm_opt.cli import main
 
     problem, _ = hardware_toppra
-    folder, reports = simulated_run
+    folder, reports, _ = simulated_run
     # the log ran under the widened tube, which no file holds: judge it under the file's
     args = [str(ROOT / "problems" / "craniotomy_hardware.toml"), str(folder / "run.csv")]
-    assert main(["evaluate", *args, "--trace", str(folder / "true.npz"), "--other-problem"]) == 0
-    out = capsys.readouterr().out
-    assert "## The measured cut" in out and "## The true cut" in out
+    assert main(["evaluate", *args, "--trace", str(folder / "true.npz"), "--other-problem"]) == 1
+    captured = capsys.readouterr()
+    assert "## The measured cut" in captured.out and "## The true cut" in captured.out
+    assert captured.err == "spm-opt: the true cut: 1 violations (joint speed)\n"
     assert main(["evaluate", *args, "--other-problem", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["angles"] == "measured"

@@ -368,8 +368,9 @@ Window = Callable[[float], bool]
 class ScriptedRobot(SimulatedRobot):
     """The simulated robot with faults scripted on its clock (simulated time: a run takes
     a fraction of a second): real signals sent to this process, reads and writes that
-    fail (a failed write never reaches the plant), a reading of θ2 that creeps, and
-    Hardware Error Status bits reported."""
+    fail (a failed write never reaches the plant), a reading of θ2 that creeps, a reading
+    of θ1 off by a few pulses while a window lasts, and Hardware Error Status bits
+    reported."""
 
     def __init__(
         self,
@@ -380,12 +381,14 @@ class ScriptedRobot(SimulatedRobot):
         read_fails: Window | None = None,
         write_fails: Window | None = None,
         creep_rad_s: tuple[float, float] = (float("inf"), 0.0),
+        theta1_off_pulses: tuple[Window, int] | None = None,
         hardware_error: tuple[float, int] = (float("inf"), 0),
     ) -> None:
         super().__init__(robot, start_rad=start_rad)
         self.signals = sorted(signals)
         self.read_fails, self.write_fails = read_fails, write_fails
         self.creep_from, self.creep_rad_s = creep_rad_s
+        self.theta1_off_pulses = theta1_off_pulses
         self.error_from, self.error_bits = hardware_error
 
     def read(self) -> Measurement:
@@ -396,10 +399,13 @@ class ScriptedRobot(SimulatedRobot):
         if self.read_fails is not None and self.read_fails(now):
             raise CommunicationError(f"scripted read failure at {now:.3f} s")
         creep = self.creep_rad_s * max(now - self.creep_from, 0.0)
+        off = 0.0
+        if self.theta1_off_pulses is not None and self.theta1_off_pulses[0](now):
+            off = self._actuator.angle(self.theta1_off_pulses[1])
         error = self.error_bits if now >= self.error_from else 0
         return dataclasses.replace(
             measurement,
-            position_rad=measurement.position_rad + np.array([0.0, creep]),
+            position_rad=measurement.position_rad + np.array([off, creep]),
             hardware_error=(measurement.hardware_error[0], measurement.hardware_error[1] | error),
         )
 

@@ -146,6 +146,42 @@ def test_rest_needs_the_whole_window(hardware_problem, move, tmp_path):
     )
 
 
+def test_the_plan_starts_once_at_rest_on_its_start_not_only_still(
+    hardware_problem, move, tmp_path
+):
+    """θ1 reads still but 10 pulses off the start (over the 5 allowed) for the first
+    0.5 s, as a joint stuck on its friction beside its goal: the hold at the start goes on
+    until the window (0.2 s) has been still on the start, so the plan's first row is 0.7 s
+    in; without the offset it is 0.2 s in."""
+    window = SETTINGS.rest_window_s
+
+    def plan_begins(tmp, **script) -> float:
+        tmp.mkdir()
+        _, table, _, _ = _run(hardware_problem, move, tmp, **script)
+        ready = table[table["phase"] == "ready"]
+        assert table["phase"].iloc[len(ready)] == "plan"
+        return float(table["time_s"].iloc[len(ready)] - table["time_s"].iloc[0])
+
+    assert plan_begins(tmp_path / "on") == pytest.approx(window + PERIOD_S, abs=1e-9)
+    off = plan_begins(tmp_path / "off", theta1_off_pulses=(_between(-1.0, 0.5), 10))
+    assert off == pytest.approx(0.5 + window + PERIOD_S, abs=PERIOD_S + 1e-9)
+
+
+def test_a_start_never_reached_is_said_and_the_plan_starts_after_the_settle_time(
+    hardware_problem, move, tmp_path, caplog
+):
+    """θ1 reads 10 pulses off the start throughout: the hold lasts ``settle_s``, the log
+    says why rest was not proven, and the plan starts (its following error checked)."""
+    caplog.set_level("INFO", logger="spm_opt.execution")
+    result, table, _, _ = _run(
+        hardware_problem, move, tmp_path, theta1_off_pulses=(lambda t: True, 10)
+    )
+    ready = table.loc[table["phase"] == "ready", "time_s"]
+    assert ready.iloc[-1] - ready.iloc[0] == pytest.approx(SETTINGS.settle_s, abs=1e-9)
+    assert "rest at the start not proven: theta1 10 pulses from its goal" in caplog.text
+    assert result.completed
+
+
 def test_a_signal_during_the_hold_is_recorded_and_the_hold_goes_on(
     hardware_problem, move, tmp_path
 ):

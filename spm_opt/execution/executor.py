@@ -3,7 +3,7 @@
 Pre-flight (:mod:`spm_opt.execution.preflight`), the plan must have been made for this
 problem, start and end at rest, and keep every limit that judges the robot. The robot must
 be where the plan starts, or, on request, is first brought there by a jerk-limited ruckig
-approach; either way it then holds the start until rest is proven (or ``settle_s``
+approach; either way it then holds the start until rest is proven on it (or ``settle_s``
 passes), so that the plan starts with the load taken up by the loop. A stop asked for
 before or during :meth:`Executor.run` is honoured (and forgotten when the run ends):
 before connecting, the run ends with nothing moved or written
@@ -439,9 +439,11 @@ class Executor:
         """Hold the plan's start until rest is confirmed or ``settle_s`` passes, so that the
         plan begins with the load taken up by the loop (a robot whose torque was just
         enabled, or that just arrived, sags under gravity first: on the family's plants
-        that start broke θ1's jerk limit in the plan's first 0.1 s, whatever the plan). Not
-        proven at rest, the plan starts anyway, its following error checked."""
-        confirmed, window = self._hold_checked("ready", start)
+        that start broke θ1's jerk limit in the plan's first 0.1 s, whatever the plan). Rest
+        counts only on the start, each joint within ``rest_position_pulses`` of it (a joint
+        can stick on its friction off it while the loop's integral builds). Not proven at
+        rest there, the plan starts anyway, its following error checked."""
+        confirmed, window = self._hold_checked("ready", start, on_target=True)
         if confirmed is None:
             _LOG.info("rest at the start not proven: %s; the plan starts", window.why())
 
@@ -455,9 +457,12 @@ class Executor:
         _LOG.info("rest %s", why)
         return False, why
 
-    def _hold_checked(self, phase: str, target: np.ndarray) -> tuple[float | None, RestWindow]:
+    def _hold_checked(
+        self, phase: str, target: np.ndarray, on_target: bool = False
+    ) -> tuple[float | None, RestWindow]:
         """Hold ``target`` (rad) in ``phase``, every cycle checked against rest there,
-        until rest is confirmed or ``settle_s`` passes (:func:`hold_until_rest`)."""
+        until rest is confirmed (``on_target``: on ``target``) or ``settle_s`` passes
+        (:func:`hold_until_rest`)."""
         loop = self._loop
         at_rest = (target, np.zeros(2), np.zeros(2))
         return hold_until_rest(
@@ -469,6 +474,7 @@ class Executor:
             self.problem.robot.actuator,
             lambda cycle: loop.check(cycle, at_rest, self._stop_requested),
             checked=True,
+            on_target=on_target,
         )
 
     @contextmanager

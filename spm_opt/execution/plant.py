@@ -166,9 +166,19 @@ class TrueState:
 
 
 class StateTrace:
-    """The plant's true state, sampled over a run: appended in memory, saved as ``.npz``."""
+    """The plant's true state, sampled over a run: appended in memory, saved as ``.npz``.
+    Between two samples the plant takes steps the samples do not show: each sample also
+    holds the largest speed of each actuator over the steps since the sample before
+    (``peak_speed_rad_s``), where the loops' answer to the goals' steps peaks."""
 
-    FIELDS = ("time_s", "position_rad", "velocity_rad_s", "goal_rad", "current_a")
+    FIELDS = (
+        "time_s",
+        "position_rad",
+        "velocity_rad_s",
+        "goal_rad",
+        "current_a",
+        "peak_speed_rad_s",
+    )
 
     def __init__(self) -> None:
         self._rows: list[tuple[float, ...]] = []
@@ -187,23 +197,25 @@ class StateTrace:
                 geometry.model_joint_angles(q[None, :], mechanism)[0],
                 geometry.model_joint_rates(q[None, :], v[None, :], mechanism)[0],
             )
-        current = plant.current_a
+        current, peak = plant.current_a, plant.take_peak_speed()
         self._rows.append(
-            (time_s, q[0], q[1], v[0], v[1], goal[0], goal[1], current[0], current[1])
+            (time_s, q[0], q[1], v[0], v[1], goal[0], goal[1], current[0], current[1], *peak)
         )
 
     def arrays(self, origin_s: float = 0.0) -> dict[str, np.ndarray]:
         """``time_s`` (n,) and ``position_rad``, ``velocity_rad_s``, ``goal_rad`` and
-        ``current_a`` (the motor currents, before the sensor's noise and rounding) (n, 2).
-        ``origin_s`` (s) is subtracted from the times: an execution log's
-        ``clock_origin_s`` puts them on the log's clock."""
-        table = np.array(self._rows, dtype=float).reshape(-1, 9)
+        ``current_a`` (the motor currents, before the sensor's noise and rounding) and
+        ``peak_speed_rad_s`` (the actuators' own, rad/s) (n, 2). ``origin_s`` (s) is
+        subtracted from the times: an execution log's ``clock_origin_s`` puts them on the
+        log's clock."""
+        table = np.array(self._rows, dtype=float).reshape(-1, 11)
         return {
             "time_s": table[:, 0] - origin_s,
             "position_rad": table[:, 1:3],
             "velocity_rad_s": table[:, 3:5],
             "goal_rad": table[:, 5:7],
             "current_a": table[:, 7:9],
+            "peak_speed_rad_s": table[:, 9:11],
         }
 
     def save(self, path: str | Path) -> None:
@@ -253,6 +265,7 @@ class DynamixelPlant:
         self.velocity_rad_s = np.zeros(2)
         self.current_a = np.zeros(2)
         self._integral = np.zeros(2)
+        self._peak_speed = [0.0, 0.0]
         self.goal_position_rad = start + robot.encoder_offset  # in the encoders' reading
         self.torque_enabled = np.zeros(2, dtype=bool)
         self.velocity_limit_rad_s = np.full(2, actuator.velocity_limit_rad_s)
@@ -308,6 +321,13 @@ class DynamixelPlant:
         """Present Current in units of 16.11 mA (signed), with the seeded noise."""
         noise = self._rng.normal(0.0, self.settings.current_noise_a, 2)
         return self._actuator.current_units(self.current_a + noise)
+
+    def take_peak_speed(self) -> tuple[float, float]:
+        """Each actuator's largest speed (rad/s) over the steps since this was last taken,
+        the present one's included; taking it starts the next span."""
+        peak = (self._peak_speed[0], self._peak_speed[1])
+        self._peak_speed = [abs(float(v)) for v in self.velocity_rad_s]
+        return peak
 
     def moving(self) -> np.ndarray:
         """Moving flags: joints turning faster than the threshold."""
@@ -381,6 +401,7 @@ class DynamixelPlant:
             self.current_a[j] = current[j] if enabled[j] else 0.0
             self.position_rad[j] = q[j] + dt * new_rate[j]
             self.velocity_rad_s[j] = new_rate[j]
+            self._peak_speed[j] = max(self._peak_speed[j], abs(new_rate[j]))
             self._driving[j] = torque[j] * new_rate[j] >= 0.0
         self.time_s += dt
 

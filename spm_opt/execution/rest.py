@@ -1,5 +1,5 @@
-"""Proof of rest: after a stop, at a plan's end and in a feed hold, the robot counts as at
-rest only over a window of readings, never on one."""
+"""Proof of rest: after a stop, at a plan's start and end and in a feed hold, the robot
+counts as at rest only over a window of readings, never on one."""
 
 from __future__ import annotations
 
@@ -17,13 +17,18 @@ from spm_opt.model.actuator import Actuator
 
 class RestWindow:
     """Proof of rest: consecutive samples covering ``window_s``, every one slower than
-    ``speed`` (rad/s), over which each joint's position spans fewer than ``pulses``."""
+    ``speed`` (rad/s), over which each joint's position spans fewer than ``pulses``; given
+    a ``target`` (rad, as the actuators read), every one also fewer than ``pulses`` from
+    it."""
 
-    def __init__(self, settings: ExecutionSettings, actuator: Actuator) -> None:
+    def __init__(
+        self, settings: ExecutionSettings, actuator: Actuator, target: np.ndarray | None = None
+    ) -> None:
         self._speed = settings.rest_speed_rad_s
         self._window = settings.rest_window_s
         self._pulses = settings.rest_position_pulses
         self._actuator = actuator
+        self._target = None if target is None else actuator.pulses(target)
         self._samples: deque[tuple[float, np.ndarray]] = deque()
         self._why = "no reading"
 
@@ -35,7 +40,13 @@ class RestWindow:
         if np.any(speed >= self._speed):
             j = int(np.argmax(speed))
             return self._restart(f"theta{j + 1} at {speed[j]:.4f} rad/s")
-        self._samples.append((time_s, self._actuator.pulses(measurement.position_rad)))
+        pulses = self._actuator.pulses(measurement.position_rad)
+        if self._target is not None:
+            off = np.abs(pulses - self._target)
+            if np.any(off >= self._pulses):
+                j = int(np.argmax(off))
+                return self._restart(f"theta{j + 1} {off[j]} pulses from its goal")
+        self._samples.append((time_s, pulses))
         while (span := self._span()).max() >= self._pulses:
             j = int(np.argmax(span))
             self._why = f"theta{j + 1} moved {span[j]} pulses in {self._covered():.3f} s"
@@ -99,13 +110,15 @@ def hold_until_rest(
     actuator: Actuator,
     inspect: Callable[[Cycle], None],
     checked: bool,
+    on_target: bool = False,
 ) -> tuple[float | None, RestWindow]:
     """Hold ``target`` (rad), each cycle's reading given to ``inspect`` (which raises
     :class:`~spm_opt.execution.cycle.Fault` on a fault; ``checked``: a run of failed
-    cycles is one too), until rest is confirmed or ``limit_s`` (s) passes; returns the time
-    rest was confirmed (None if not) and the window."""
+    cycles is one too), until rest is confirmed (``on_target``: at rest on ``target``) or
+    ``limit_s`` (s) passes; returns the time rest was confirmed (None if not) and the
+    window."""
     loop.phase = phase
-    window = RestWindow(settings, actuator)
+    window = RestWindow(settings, actuator, target if on_target else None)
     begin = None
     while True:
         cycle = loop.begin()

@@ -55,7 +55,8 @@ class ExecutionSettings:
     rest_window_s : float, s
         Rest is confirmed by samples covering this long, every one slower than
         ``rest_speed_rad_s``, over which each joint's measured position spans fewer than
-        ``rest_position_pulses`` encoder pulses.
+        ``rest_position_pulses`` encoder pulses (at the plan's start, every one also fewer
+        than that from the start).
     rest_position_pulses : int
         See ``rest_window_s`` (pulses of the actuator's encoder: 5 of the L54's 361,384
         per revolution are 0.005°).

@@ -91,7 +91,7 @@ def _check_joints(checks: Checks, problem: Problem, motion: Motion, steps: Steps
         angle = motion.q[:, joint] / DEG
         checks.upper("joint range", f"{name} upper range", angle, high / DEG)
         checks.lower("joint range", f"{name} lower range", angle, low / DEG)
-        speed = np.abs(motion.qd[:, joint])
+        speed = motion.joint_speed()[:, joint]
         checks.upper("joint speed", f"{name} speed", speed, limits.max_joint_speed)
         checks.upper(
             "joint acceleration",
@@ -176,7 +176,7 @@ def _report(
     """The report of a judged motion: its figures (:class:`~spm_opt.judge.report.Report`)
     and ``violations``."""
     robot, limits = problem.robot, problem.limits
-    t, qd, torque = motion.t, motion.qd, motion.torque
+    t, torque = motion.t, motion.torque
     peak_torque = _peaks(torque)
     peak_current = _peaks(motion.current)
     mean_speed = float(_time_mean(cut.tool_speed, t))
@@ -186,7 +186,7 @@ def _report(
     return Report(
         planner=planner,
         duration_s=duration,
-        peak_joint_speed_rad_s=_peaks(qd).tolist(),
+        peak_joint_speed_rad_s=_peaks(motion.joint_speed()).tolist(),
         joint_speed_limit_rad_s=limits.max_joint_speed,
         peak_joint_acceleration_rad_s2=_peaks(motion.qdd).tolist(),
         rms_jerk_rad_s3=np.sqrt(_time_mean(motion.jerk**2, t)).tolist(),
@@ -209,7 +209,7 @@ def _report(
         torque_margin=(1.0 - peak_torque / robot.actuator.continuous_torque_nm).tolist(),
         peak_current_a=peak_current.tolist(),
         current_margin=(1.0 - peak_current / robot.actuator.continuous_current_a).tolist(),
-        energy_j=float(np.trapezoid(_joint_sum(np.abs(torque * qd)), t)),
+        energy_j=float(np.trapezoid(_joint_sum(np.abs(torque * motion.qd)), t)),
         max_tool_incidence_deg=float(np.max(cut.incidence)),
         max_depth_speed_mm_s=_largest(cut.depth_speed, MM),
         max_depth_acceleration_mm_s2=_largest(cut.depth_acceleration, MM),

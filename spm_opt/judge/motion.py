@@ -21,6 +21,10 @@ class Motion:
         The torque the actuators delivered.
     current : ndarray, A
         The motor current it took.
+    peak_speed : ndarray or None, rad/s
+        Where the motion is known between its samples (a plant's true state): each joint's
+        largest speed since the sample before, this one's included. None: the samples'
+        own ``|qd|``.
     """
 
     t: np.ndarray
@@ -30,6 +34,12 @@ class Motion:
     jerk: np.ndarray
     torque: np.ndarray
     current: np.ndarray
+    peak_speed: np.ndarray | None = None
+
+    def joint_speed(self) -> np.ndarray:
+        """Each joint's speed the judge holds to its limit (N, 2), rad/s: ``peak_speed``
+        where known, else ``|qd|``."""
+        return np.abs(self.qd) if self.peak_speed is None else self.peak_speed
 
 
 @dataclass(frozen=True)

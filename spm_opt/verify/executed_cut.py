@@ -36,7 +36,12 @@ judgement, against the problem's full contour tolerance:
 
 With the plant's true state (``StateTrace``, from ``spm-opt execute --backend sim --trace``
 or ``spm-opt emulate --trace``) the same judge runs on the true angles, rates and currents
-interpolated at the log's times: the true cut is what the surgeon gets. The true angles
+interpolated at the log's times: the true cut is what the surgeon gets. Its joint speed is
+the plant's largest between two rows (the trace's ``peak_speed_rad_s``): each goal is a step
+the loops answer within the period, so the speed peaks between reads, at a phase that
+depends on when the goal arrived (on the simulated robot driving ``prototype_plant.toml``,
+toppra's plan of the hardware problem peaked at 1.454 rad/s between reads, 1.410 at them,
+against a limit of 1.435). The true angles
 lack the encoder offsets the measured ones carry (the position loops hold the encoders'
 reading at the goal, so the measured cut can look better than the true one).
 
@@ -245,7 +250,14 @@ def evaluate_log(
     current = state["current_a"]
     torque = problem.robot.actuator.current_map.torque(current)
     true = _judge(
-        problem, run, state["position_rad"], state["velocity_rad_s"], current, torque, "true"
+        problem,
+        run,
+        state["position_rad"],
+        state["velocity_rad_s"],
+        current,
+        torque,
+        "true",
+        state["peak_speed_rad_s"],
     )
     return LogReports(judged, true)
 
@@ -265,8 +277,10 @@ def _judge(
     current: np.ndarray,
     torque: np.ndarray,
     angles: str,
+    peak_speed: np.ndarray | None = None,
 ) -> ExecutionReport:
-    """One judgement of the run's rows with these angles, rates, currents and torques."""
+    """One judgement of the run's rows with these angles, rates, currents and torques (and
+    the joints' peak speeds between them, where known)."""
     qdd, jerk = smoothed_derivatives(run.t, qd, run.period_s)
     header = run.header
     plan = header.get("plan") or {}
@@ -278,7 +292,7 @@ def _judge(
         unresolved = unresolved_rules(resolution, _judged_limits(problem, tube, path))
     report = judge(
         problem,
-        Motion(run.t, q, qd, qdd, jerk, torque, current),
+        Motion(run.t, q, qd, qdd, jerk, torque, current, peak_speed),
         tube,
         path,
         planner=plan.get("planner"),
@@ -460,7 +474,8 @@ def _trace_shaped(trace: dict[str, np.ndarray]) -> bool:
 
 
 def _true_state(path: Path, run: _Run) -> dict[str, np.ndarray]:
-    """The plant's true position, velocity and current (N, 2) at the run's times, from a
+    """The plant's true position, velocity and current (N, 2) at the run's times, and its
+    peak speeds since the row before (one period before the first), from a
     :class:`StateTrace` file on the log's clock."""
     origin = run.header.get("clock_origin_s")
     if origin is None:
@@ -484,7 +499,24 @@ def _true_state(path: Path, run: _Run) -> dict[str, np.ndarray]:
             f"trace {path}: covers {span} of the log's clock, not the judged rows' "
             f"{first:.3f} to {last:.3f} s; is it this run's trace?"
         )
-    return {
+    state = {
         name: np.column_stack([np.interp(run.t, times, trace[name][:, j]) for j in range(2)])
         for name in ("position_rad", "velocity_rad_s", "current_a")
     }
+    between = _peaks_between(times, trace["peak_speed_rad_s"], run.t, run.period_s)
+    state["peak_speed_rad_s"] = np.maximum(np.abs(state["velocity_rad_s"]), between)
+    return state
+
+
+def _peaks_between(
+    times: np.ndarray, peaks: np.ndarray, rows: np.ndarray, period_s: float
+) -> np.ndarray:
+    """The largest of the trace's ``peaks`` (n, 2), sampled at ``times`` (n,), s, over each
+    of ``rows``' spans (N,), s: after the row before, up to and at the row (the first's
+    begins one ``period_s`` before it); 0 for a span no sample falls in (N, 2)."""
+    bounds = np.searchsorted(times, np.concatenate([[rows[0] - period_s], rows]), side="right")
+    largest = np.zeros((len(rows), 2))
+    spans = np.flatnonzero(bounds[1:] > bounds[:-1])
+    if len(spans):  # an empty span has no width, so each span ends where the next begins
+        largest[spans] = np.maximum.reduceat(peaks[: bounds[-1]], bounds[spans], axis=0)
+    return largest
