@@ -43,7 +43,12 @@ from spm_opt.verify.breakaway import slowed_for_breakaways
 from spm_opt.verify.compensation import compensate
 from spm_opt.verify.executed_cut import evaluate_log
 from spm_opt.verify.plant_family import PlantFamily
-from spm_opt.verify.predicted_cut import PredictedCut, highest_feed_inside, predict_cut
+from spm_opt.verify.predicted_cut import (
+    LIMIT_SHARES,
+    PredictedCut,
+    highest_feed_inside,
+    predict_cut,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 IDENTIFICATION = ROOT / "problems" / "identification.toml"
@@ -95,14 +100,15 @@ def true_run(
         "true_mm": true.max_contour_deviation_mm,
         "true_broken": sorted({v.rule for v in true.violations}),
         "true_worst": {v.limit: [v.worst, v.allowed] for v in true.violations},
-        "peak_joint_speed_rad_s": max(true.peak_joint_speed_rad_s),
-        "joint_speed_limit_rad_s": true.joint_speed_limit_rad_s,
+        "limit_shares": true.limit_shares,
     }
 
 
-def robot_rules_broken(predicted: PredictedCut) -> list[str]:
-    """The robot's rules the predicted run breaks, by name."""
-    return sorted({v.rule for v in predicted.broken_limits})
+def robot_rules_unkept(predicted: PredictedCut) -> list[str]:
+    """The robot's rules the predicted run breaks, or whose margin it takes (the joints'
+    speed, acceleration and jerk past :data:`LIMIT_SHARES` of their limits), by name."""
+    past = {f"joint {name.split()[-1]}" for name, _ in predicted.past_margin}
+    return sorted({v.rule for v in predicted.broken_limits} | past)
 
 
 def main() -> None:
@@ -187,10 +193,18 @@ def main() -> None:
                             "duration_s": slowing.trajectory.duration,
                             "predicted_mm": learned.predicted.deviation_mm,
                             "predicted_inside": learned.predicted.inside,
-                            "predicted_broken": robot_rules_broken(learned.predicted),
+                            "predicted_broken": robot_rules_unkept(learned.predicted),
                             "compute_s": time.perf_counter() - started,
                             "run": true_run(problem, learned.plan, plant, work, f"{name}-slowed"),
+                            "lead_predicted_mm": slowing.predicted.deviation_mm,
+                            "lead_predicted_inside": slowing.predicted.inside,
+                            "lead_predicted_broken": robot_rules_unkept(slowing.predicted),
+                            "lead_run": None,
                         }
+                        if slowed["predicted_broken"] and slowing.predicted.inside:
+                            slowed["lead_run"] = true_run(  # the lab's run: led, not compensated
+                                problem, slowing.trajectory, plant, work, f"{name}-slowed-lead"
+                            )
                 slower = None
                 if not kept.inside:  # the lab's next step: the lead plan at the highest feed
                     found = highest_feed_inside(problem, plan, model)
@@ -202,7 +216,7 @@ def main() -> None:
                         slower = {
                             "feed": feed,
                             "predicted_mm": at_feed.deviation_mm,
-                            "predicted_broken": robot_rules_broken(at_feed),
+                            "predicted_broken": robot_rules_unkept(at_feed),
                             "run": run,
                         }
                 row = {
@@ -214,14 +228,14 @@ def main() -> None:
                     "planned_mm": so.evaluate(problem, plan).max_contour_deviation_mm,
                     "predicted_lead_mm": predicted.deviation_mm,
                     "predicted_lead_inside": predicted.inside,
-                    "predicted_lead_broken": robot_rules_broken(predicted),
+                    "predicted_lead_broken": robot_rules_unkept(predicted),
                     "lead": lead,
                     "iterations_mm": [i.deviation_mm for i in compensation.iterations],
                     "corrections": compensation.kept,
                     "scale": compensation.plan.metadata["compensation"]["scale"],
                     "predicted_compensated_mm": kept.deviation_mm,
                     "predicted_compensated_inside": kept.inside,
-                    "predicted_compensated_broken": robot_rules_broken(kept),
+                    "predicted_compensated_broken": robot_rules_unkept(kept),
                     "compensated": compensated,
                     "slowed": slowed,
                     "highest_feed": slower,
@@ -245,26 +259,47 @@ def main() -> None:
 
 
 def lab_run(row: dict) -> tuple[str, dict | None, float | None, list[str]]:
-    """The run a lab makes after the prediction: the compensated stream where its predicted
-    cut is inside and its predicted run keeps the robot's limits; else the plan slowed at its
-    breakaways and compensated, where its predicted cut is inside; else the compensated
-    stream where its predicted cut is inside; else the lead plan at the highest feed
-    predicted inside. Returns (which run: "compensated", "slowed" or "feed", the run, its
-    predicted cut (mm), the robot's rules its prediction breaks); the run None where no
-    feed is predicted inside."""
-    compensated = (
-        "compensated",
-        row["compensated"],
-        row["predicted_compensated_mm"],
-        row["predicted_compensated_broken"],
-    )
+    """The run a lab makes after the prediction: the first predicted inside the tube and
+    keeping the robot's limits with their margins, of the compensated stream, the plan
+    slowed at its breakaways and compensated, and that slowed plan led alone; else the
+    first of them predicted inside; else the lead plan at the highest feed predicted
+    inside. Returns (which run: "compensated", "slowed", "slowed, led" or "feed", the run,
+    its predicted cut (mm), the robot's rules its prediction breaks or takes the margin
+    of); the run None where none was made."""
+    candidates = [
+        (
+            "compensated",
+            row["compensated"],
+            row["predicted_compensated_mm"],
+            row["predicted_compensated_inside"],
+            row["predicted_compensated_broken"],
+        )
+    ]
     slowed = row["slowed"]
-    if row["predicted_compensated_inside"] and not row["predicted_compensated_broken"]:
-        return compensated
-    if slowed is not None and slowed["predicted_inside"]:
-        return "slowed", slowed["run"], slowed["predicted_mm"], slowed["predicted_broken"]
-    if row["predicted_compensated_inside"]:
-        return compensated
+    if slowed is not None:
+        candidates.append(
+            (
+                "slowed",
+                slowed["run"],
+                slowed["predicted_mm"],
+                slowed["predicted_inside"],
+                slowed["predicted_broken"],
+            )
+        )
+        if slowed["lead_run"] is not None:
+            candidates.append(
+                (
+                    "slowed, led",
+                    slowed["lead_run"],
+                    slowed["lead_predicted_mm"],
+                    slowed["lead_predicted_inside"],
+                    slowed["lead_predicted_broken"],
+                )
+            )
+    for wanted in (lambda inside, unkept: inside and not unkept, lambda inside, _: inside):
+        for kind, run, predicted_mm, inside, unkept in candidates:
+            if wanted(inside, unkept):
+                return kind, run, predicted_mm, unkept
     slower = row["highest_feed"]
     if slower is None:
         return "feed", None, None, []
@@ -275,25 +310,32 @@ def limit_lines(rows: list[dict]) -> list[str]:
     """What the lab's true runs of one speed do to the robot's limits, and whether their
     predictions said so, a line each."""
     runs = [(run, predicted) for _, run, _, predicted in map(lab_run, rows) if run]
-    breaking = foreseen = extra = 0
+    breaking = foreseen = extra = past = 0
     for run, predicted in runs:
         broken = set(run["true_broken"]) & ROBOT_RULES
         breaking += bool(broken)
         foreseen += bool(broken) and broken <= set(predicted)
         extra += bool(set(predicted) - broken)
-    speed = max(run["peak_joint_speed_rad_s"] / run["joint_speed_limit_rad_s"] for run, _ in runs)
-    jerks = [
-        worst
-        for run, _ in runs
-        for limit, (worst, _) in run["true_worst"].items()
-        if limit.endswith(" jerk")
-    ]
-    jerk = f"worst {max(jerks):.3g} rad/s³" if jerks else "none broken"
+        past += any(
+            share > LIMIT_SHARES[name.split()[-1]] for name, share in run["limit_shares"].items()
+        )
+    worst = {
+        figure: max(
+            share
+            for run, _ in runs
+            for name, share in run["limit_shares"].items()
+            if name.endswith(figure)
+        )
+        for figure in LIMIT_SHARES
+    }
+    shares = "; ".join(f"{figure} {share:.1%}" for figure, share in worst.items())
     return [
-        f"- Robot limits on the lab's true runs: joint speed at most {speed:.1%} of its limit; "
-        f"joint jerk {jerk}. Of the {breaking} that broke a robot limit, the prediction "
-        f"named every limit broken on {foreseen}; it named a limit the true run kept on "
-        f"{extra} of {len(runs)}."
+        f"- Robot limits on the lab's true runs: the joints' worst {shares} of the limit; "
+        f"{past} of {len(runs)} past the margin the prediction keeps "
+        f"({', '.join(f'{f} {v:.0%}' for f, v in LIMIT_SHARES.items())}). Of the {breaking} "
+        f"that broke a robot limit, the prediction named every limit broken on {foreseen} "
+        f"(broken or within the margin); it named a limit the true run kept on {extra} of "
+        f"{len(runs)}."
     ]
 
 
@@ -304,6 +346,9 @@ def summary_lines(rows: list[dict]) -> list[str]:
     errors = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
     errors += [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
     errors += [abs(s["predicted_mm"] - s["run"]["true_mm"]) for s in slowed]
+    errors += [
+        abs(s["lead_predicted_mm"] - s["lead_run"]["true_mm"]) for s in slowed if s["lead_run"]
+    ]
     errors += [
         abs(r["highest_feed"]["predicted_mm"] - r["highest_feed"]["run"]["true_mm"])
         for r in rows
@@ -326,6 +371,7 @@ def summary_lines(rows: list[dict]) -> list[str]:
         f"{sum(r['compensated']['true_mm'] <= r['tube_mm'] for r in rows)} compensated; "
         f"the lab's run ({chosen.count('compensated')} compensated, "
         f"{chosen.count('slowed')} slowed at the breakaways and compensated, "
+        f"{chosen.count('slowed, led')} slowed and led alone, "
         f"{chosen.count('feed')} at the highest feed predicted inside): "
         f"{sum(inside)} of {len(rows)} completed inside.",
         f"- Predicted outside even compensated, before any run: {len(outside)}"
@@ -359,17 +405,23 @@ def _with_slowed(rows: list[dict]) -> list[tuple[dict, dict]]:
 
 
 def _slowing_line(rows: list[dict]) -> str:
-    """What slowing at the breakaways did to the rows of one speed, one line."""
+    """What slowing at the breakaways (or throughout) did to the rows of one speed, one
+    line."""
     pairs = _with_slowed(rows)
     if not pairs:
         return "- Slowed at the breakaways: none."
     paces = [s["feed"] for _, s in pairs]
     true = [s["run"]["true_mm"] for _, s in pairs]
     longer = [s["duration_s"] / r["plan_duration_s"] for r, s in pairs]
+    throughout = sum(
+        abs(s["feed"] * x - 1.0) < 1e-6 for (_, s), x in zip(pairs, longer, strict=True)
+    )
     compute = [s["compute_s"] for _, s in pairs]
     return (
         f"- Slowed at the breakaways (where the compensated stream's predicted run breaks a "
-        f"robot limit): {len(pairs)} plans, pace there {min(paces):.2f}–{max(paces):.2f}, "
+        f"robot limit or takes its margin): {len(pairs)} plans, {throughout} of them "
+        f"throughout (no dip kept the limits; a uniform pace makes the plan 1/pace as "
+        f"long), pace {min(paces):.2f}–{max(paces):.2f}, "
         f"{min(true):.3f}–{max(true):.3f} mm true; the plans {min(longer):.2f}–"
         f"{max(longer):.2f} times as long; slowing and compensating took median "
         f"{np.median(compute):.0f} s, at most {max(compute):.0f} s a plan."
@@ -408,7 +460,7 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         "highest feed predicted inside: predicted / true, mm",
         "completed",
         "the lab's run: broken on its true run",
-        "robot limits its prediction breaks",
+        "robot limits its prediction breaks or takes the margin of",
     ]
 
     def cells(r: dict) -> list[str]:
@@ -469,8 +521,11 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         "prediction and the compensation on the identified file; the true cut from the "
         "plant's true state, the plant running its own loops. Plant numbers are the family's "
         "draws from seed 2026. Where the compensated stream's predicted run breaks a robot "
-        "limit, the plan is slowed where its joints break away (`spm-opt slow-breakaways`) "
-        "and compensated again; the lab runs it where its predicted cut is inside. Where the "
+        "limit or takes its margin, the plan is slowed where its joints break away "
+        "(`spm-opt slow-breakaways`) and compensated again; the lab runs the first predicted "
+        "inside and within the robot's limits and margins of the compensated stream, the "
+        "slowed and compensated one and the slowed one led alone, else the first predicted "
+        "inside. Where the "
         "compensated stream's predicted cut leaves the tube, and no slowed stream's is inside, "
         "the lab's run is the lead plan at the highest feed predicted inside "
         "(`spm-opt predict --highest-feed`). Completed: lead / compensated / the lab's run "
@@ -509,8 +564,20 @@ def figure(rows: list[dict]) -> Figure:
             "^",
             "lead at the highest feed predicted inside",
         ),
+        (
+            [
+                {"predicted_mm": s["lead_predicted_mm"], "run": s["lead_run"]}
+                for _, s in _with_slowed(rows)
+                if s.get("lead_run")
+            ],
+            "tab:purple",
+            "D",
+            "slowed at the breakaways, led alone",
+        ),
     )
     for runs, colour, marker, label in others:
+        if not runs:
+            continue
         left.scatter(
             [s["predicted_mm"] for s in runs],
             [s["run"]["true_mm"] for s in runs],

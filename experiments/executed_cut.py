@@ -23,10 +23,10 @@ ROBOT`` is the lab's whole path instead: the problems' robot is replaced by ROBO
 the plans are made on it, the executor reads the encoders through its calibration, and the
 cut is predicted on it; the plant with its offsets at zero is then left out, since that
 calibration is of the plant with its offsets. With ``--lab-robot`` each plan whose
-predicted run breaks a robot limit also runs slowed at its breakaways (``spm-opt
-slow-breakaways`` on ROBOT:
+predicted run breaks a robot limit or takes a joint's margin also runs slowed at its
+breakaways, or throughout where no dip keeps them (``spm-opt slow-breakaways`` on ROBOT:
 :func:`spm_opt.verify.breakaway.slowed_for_breakaways`), led, and the table gives that
-run's pace at the breakaways, its duration, its true cut, the robot limits it broke, and
+run's pace, its duration, its true cut, the robot limits it broke, and
 its worst joint speed, acceleration and jerk against their limits. ``--backend
 emulator`` runs the same through the real Dynamixel SDK against the emulated actuators, in
 real time (about two minutes; keep the machine otherwise idle:
@@ -95,6 +95,8 @@ class Row:
     duration_s: float
     pace_at_breakaways: float
     worst_share_of_limit: dict[str, float]
+    predicted_share_of_limit: dict[str, float]
+    slowed_throughout: bool = False
 
 
 def _plants(calibrated: bool) -> Iterator[tuple[str, Robot]]:
@@ -167,35 +169,20 @@ def run_one(
         predicted_broken_limits=[v.limit for v in predicted.broken_limits],
         duration_s=plan.duration,
         pace_at_breakaways=plan.metadata.get("slowed", {}).get("feed", 1.0),
-        worst_share_of_limit=_worst_shares(problem, log, trace),
+        slowed_throughout=plan.metadata.get("slowed", {}).get("uniform", False),
+        worst_share_of_limit=_worst_shares(true.limit_shares),
+        predicted_share_of_limit=_worst_shares(predicted.report.limit_shares),
     )
 
 
-def _worst_shares(problem: so.Problem, log: Path, trace: Path) -> dict[str, float]:
-    """The true run's worst joint speed, acceleration and jerk, each a share of its limit:
-    the judge's worst values, read by judging the run against limits nothing keeps."""
-    limits = problem.limits
-    bounds = {
-        "speed": limits.max_joint_speed,
-        "acceleration": limits.max_joint_acceleration,
-        "jerk": limits.max_joint_jerk,
-    }
-    tiny = dataclasses.replace(
-        limits, max_joint_speed=1e-9, max_joint_acceleration=1e-9, max_joint_jerk=1e-9
-    )
-    tight = dataclasses.replace(problem, limits=tiny)
-    true = evaluate_log(tight, log, trace, other_problem=True).true
-    assert true is not None
-    shares = {}
-    for kind, bound in bounds.items():
-        worst = [
-            abs(v.worst)
-            for v in true.violations
-            if v.limit.startswith("theta") and v.limit.endswith(f" {kind}")
-        ]
-        if bound is not None and worst:
-            shares[kind] = max(worst) / bound
-    return shares
+def _worst_shares(shares: dict[str, float]) -> dict[str, float]:
+    """The worst over the joints of each figure's share of its limit, from a report's
+    ``limit_shares`` ("theta2 jerk": 0.9 → "jerk": 0.9)."""
+    worst: dict[str, float] = {}
+    for name, share in shares.items():
+        kind = name.split()[-1]
+        worst[kind] = max(worst.get(kind, 0.0), share)
+    return worst
 
 
 def _robot_limits(violations: list[Violation]) -> list[str]:
@@ -304,25 +291,25 @@ def slowed_table(rows: list[Row]) -> str:
             == (slowed.problem, slowed.planner, slowed.plant, "lead")
         )
 
-        def shares(row: Row) -> str:
-            return ", ".join(
-                f"{kind} {share:.0%}" for kind, share in row.worst_share_of_limit.items()
-            )
+        def shares(worst: dict[str, float]) -> str:
+            return ", ".join(f"{kind} {share:.1%}" for kind, share in worst.items())
 
         lines.append(
             (
                 slowed.problem,
                 slowed.planner,
                 slowed.plant,
-                f"{slowed.pace_at_breakaways:.2f}",
+                f"{slowed.pace_at_breakaways:.2f}"
+                + (" throughout" if slowed.slowed_throughout else ""),
                 f"{lead.duration_s:.1f} → {slowed.duration_s:.1f}",
                 "yes" if slowed.completed else "no",
                 f"{lead.true_deviation_mm:.3f} → {slowed.true_deviation_mm:.3f}",
                 f"{slowed.predicted_deviation_mm - slowed.true_deviation_mm:+.3f}",
                 ", ".join(slowed.true_broken_limits) or "none",
                 ", ".join(slowed.predicted_broken_limits) or "none",
-                shares(lead),
-                shares(slowed),
+                shares(lead.worst_share_of_limit),
+                shares(slowed.predicted_share_of_limit),
+                shares(slowed.worst_share_of_limit),
             )
         )
     if not lines:
@@ -331,7 +318,7 @@ def slowed_table(rows: list[Row]) -> str:
         "problem",
         "planner",
         "plant",
-        "pace at the breakaways",
+        "pace (at the breakaways, or throughout)",
         "duration, led → slowed (s)",
         "completed (slowed)",
         "true cut, led → slowed (mm)",
@@ -339,7 +326,8 @@ def slowed_table(rows: list[Row]) -> str:
         "robot limits broken, true (slowed)",
         "robot limits broken, predicted (slowed)",
         "worst joint speed, acceleration, jerk of their limits, true (led)",
-        "the same (slowed)",
+        "the same, predicted (slowed)",
+        "the same, true (slowed)",
     )
     return "\n".join(markdown_table(header, lines))
 
@@ -471,8 +459,8 @@ def main(argv: list[str] | None = None) -> int:
     slowed = slowed_table(rows)
     if slowed:
         text += (
-            "\nEach plan slowed at its breakaways on the same robot file, led "
-            "(`spm-opt slow-breakaways`):\n\n" + slowed + "\n"
+            "\nEach plan slowed at its breakaways (or throughout, where no dip keeps the "
+            "limits) on the same robot file, led (`spm-opt slow-breakaways`):\n\n" + slowed + "\n"
         )
     (args.out / "executed_cut.md").write_text(text)
     figure(rows, args.out / "executed_cut.png")

@@ -20,6 +20,7 @@ from spm_opt.judge.limits import ROBOT_RULES
 from spm_opt.problem.retiming import CREEP_RAD_S, breakaway_times, slowed_near
 from spm_opt.problem.trajectory import Trajectory
 from spm_opt.verify.breakaway import FEED_RESOLUTION, slowed_for_breakaways
+from spm_opt.verify.compensation import compensate
 from spm_opt.verify.executed_cut import evaluate_log
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,6 +90,34 @@ def _plan_time_map(slowed: Trajectory, plan: Trajectory) -> np.ndarray:
     angle = np.unwrap(np.arctan2(q[:, 1] / 0.2, -(q[:, 0] - 0.15) / 0.15))
     plan_angle = 2 * np.pi * np.linspace(0, 8, 8001) / 8.0 + angle[0]
     return np.interp(plan_angle, angle, t)
+
+
+def test_a_plan_no_dip_can_slow_enough_is_slowed_throughout():
+    """toppra's hardware plan runs θ1 at its speed limit for most of its 2.8 s, and its
+    predicted run breaks that limit. Its breakaways' dips overlap: the deeper ones break the
+    plan's own acceleration limit, the shallowest (0.95) leaves θ1's speed past its 95 %
+    margin. The whole plan is then slowed to the highest uniform pace that keeps every
+    limit with its margin: q(pace·t), whose rates all fall with the pace, so the plan
+    stays clean; the next pace up (within the resolution) does not keep the margin. The
+    slowed plan is built on the plan's own samples, so a stream compensated on it is as
+    clean (one stretched in time by its polynomials, then sampled on its breakpoints and
+    a 100 Hz grid together, broke θ1's jerk tenfold)."""
+    problem = so.load_problem(ROOT / "problems" / "craniotomy_hardware.toml")
+    plan = so.plan(problem, "toppra")
+    tried = []
+    slowed = slowed_for_breakaways(problem, plan, progress=tried.append)
+    assert slowed.where == "throughout" and slowed.keeps_limits and slowed.feed < 1.0
+    assert slowed.trajectory.duration == pytest.approx(plan.duration / slowed.feed, rel=1e-9)
+    t = np.linspace(0.0, plan.duration, 57)
+    assert np.allclose(slowed.trajectory.position(t / slowed.feed), plan.position(t), atol=1e-12)
+    assert not so.evaluate(problem, slowed.trajectory).violations
+    dipped = [s for s in tried if s.where == "at the breakaways" and s.feed < 1.0]
+    assert dipped and not any(s.keeps_limits for s in dipped)
+    above = [s for s in tried if s.where == "throughout" and s.feed > slowed.feed]
+    assert above and not any(s.keeps_limits for s in above)
+    assert min(s.feed for s in above) <= slowed.feed + FEED_RESOLUTION + 1e-9
+    compensated = compensate(problem, slowed.trajectory, iterations=1)  # built on its samples
+    assert not so.evaluate(problem, compensated.plan).violations
 
 
 @pytest.mark.slow

@@ -406,6 +406,8 @@ def test_the_true_speed_is_judged_between_the_reads(simulated_run):
     limit = true.joint_speed_limit_rad_s
     assert at_reads[0] < limit < fastest[0]
     assert [v.limit for v in true.violations] == ["theta1 speed"]
+    shares = [true.limit_shares[f"theta{j} speed"] for j in (1, 2)]
+    assert shares == pytest.approx((fastest / limit).tolist(), rel=1e-12)
 
 
 @settings(max_examples=200, deadline=None)

@@ -146,9 +146,7 @@ def test_rest_needs_the_whole_window(hardware_problem, move, tmp_path):
     )
 
 
-def test_the_plan_starts_once_at_rest_on_its_start_not_only_still(
-    hardware_problem, move, tmp_path
-):
+def test_the_plan_starts_once_at_rest_on_its_start_not_only_still(hardware_problem, move, tmp_path):
     """θ1 reads still but 10 pulses off the start (over the 5 allowed) for the first
     0.5 s, as a joint stuck on its friction beside its goal: the hold at the start goes on
     until the window (0.2 s) has been still on the start, so the plan's first row is 0.7 s

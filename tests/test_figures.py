@@ -548,6 +548,7 @@ def test_the_executed_cut_experiment_shows_the_cut_too(tmp_path: Path) -> None:
             duration_s=38.2,
             pace_at_breakaways=1.0,
             worst_share_of_limit={"speed": 0.3, "acceleration": 1.2, "jerk": 2.5},
+            predicted_share_of_limit={"speed": 0.3, "acceleration": 1.1, "jerk": 2.3},
         )
         for problem, tube in (("hardware", None), ("bone_flap", 0.1))
         for planner in ("toppra", "ocp-min-time")
@@ -579,7 +580,12 @@ def test_the_compensated_cut_figure_keeps_the_rules(tmp_path: Path) -> None:
             "lead": {"true_mm": 0.052 + 0.01 * plant},
             "predicted_compensated_mm": 0.03 + 0.01 * plant,
             "compensated": {"true_mm": 0.031 + 0.01 * plant},
-            "slowed": {"predicted_mm": 0.02 + 0.01 * plant, "run": {"true_mm": 0.021}}
+            "slowed": {
+                "predicted_mm": 0.02 + 0.01 * plant,
+                "run": {"true_mm": 0.021},
+                "lead_predicted_mm": 0.025,
+                "lead_run": {"true_mm": 0.026} if plant == 1 else None,
+            }
             if planner == "toppra"
             else None,
             "highest_feed": {"predicted_mm": 0.11, "run": {"true_mm": 0.112}}

@@ -17,7 +17,12 @@ import spm_opt as so
 from spm_opt.execution import Executor, SimulatedRobot
 from spm_opt.judge.limits import ROBOT, RULES
 from spm_opt.verify.executed_cut import evaluate_log
-from spm_opt.verify.predicted_cut import FEED_RESOLUTION, highest_feed_inside, predict_cut
+from spm_opt.verify.predicted_cut import (
+    FEED_RESOLUTION,
+    LIMIT_SHARES,
+    highest_feed_inside,
+    predict_cut,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 FLAP = ROOT / "problems" / "craniotomy_bone_flap.toml"
@@ -74,6 +79,43 @@ def test_the_prediction_names_the_robot_limits_the_true_run_breaks(flap_plan, tm
     worst = predicted.broken_limits[0]
     assert worst.worst / worst.allowed >= max(v.worst / v.allowed for v in predicted.broken_limits)
     assert predicted.limits_line().startswith(f"predicted run on prototype_plant breaks {worst}")
+
+
+def test_a_predicted_run_inside_a_joint_limit_but_past_its_margin_does_not_keep_it():
+    """toppra's hardware plan runs θ1 at its speed limit. At 0.97 of its pace its predicted
+    run breaks no robot limit, but takes θ1's speed past the 95 % of the limit the margin
+    allows (measured: 98.6 %); at 0.9 of the pace it keeps every margin (91.5 %). Each
+    share is the judged figure over its limit; a run past a margin does not keep the limits,
+    and its line says which and by how much."""
+    problem = so.load_problem(ROOT / "problems" / "craniotomy_hardware.toml")
+    plan = so.plan(problem, "toppra")
+    near = predict_cut(problem, plan.time_scaled(0.97))
+    assert not near.broken_limits and not near.keeps_limits
+    shares = near.report.limit_shares
+    assert set(shares) == {f"theta{j} {f}" for j in (1, 2) for f in LIMIT_SHARES}
+    assert LIMIT_SHARES["speed"] < shares["theta1 speed"] <= 1.005
+    assert [name for name, _ in near.past_margin] == ["theta1 speed"]
+    speed = near.report.peak_joint_speed_rad_s[0] / near.report.joint_speed_limit_rad_s
+    assert shares["theta1 speed"] == pytest.approx(speed, rel=1e-12)
+    assert near.limits_line() == (
+        f"predicted run on prototype takes theta1 speed to {shares['theta1 speed']:.1%} of its "
+        "limit, past the 95% kept for what the model does not see"
+    )
+    slower = predict_cut(problem, plan.time_scaled(0.9))
+    assert slower.keeps_limits and not slower.past_margin and slower.limits_line() == ""
+    assert slower.report.limit_shares["theta1 speed"] < LIMIT_SHARES["speed"]
+
+
+def test_the_commands_help_states_the_margins_the_prediction_keeps(capsys):
+    """``execute --predicted-limits`` and ``slow-breakaways`` say the shares
+    :data:`LIMIT_SHARES` keeps, as a person reads them in the help."""
+    speed, jerk = (f"{LIMIT_SHARES[f]:.0%}".replace("%", " %") for f in ("speed", "jerk"))
+    assert LIMIT_SHARES["acceleration"] == LIMIT_SHARES["jerk"]
+    for command in ("execute", "slow-breakaways"):
+        assert run_cli([command, "--help"])[0] == 0
+        text = " ".join(capsys.readouterr().out.split())
+        assert f"speed past {speed}" in text or f"speed within {speed}" in text
+        assert f"jerk past {jerk}" in text or f"jerk within {jerk}" in text
 
 
 def tight_problem(tmp_path: Path) -> Path:

@@ -265,7 +265,7 @@ def _slow_breakaways(args: argparse.Namespace) -> None:
     from spm_opt.problem.problem import load_problem
     from spm_opt.problem.provenance import check_plan_made_for
     from spm_opt.problem.trajectory import Trajectory
-    from spm_opt.verify.breakaway import HALF_WIDTH_S, slowed_for_breakaways
+    from spm_opt.verify.breakaway import HALF_WIDTH_S, Slowed, slowed_for_breakaways
 
     if args.out.suffix != ".csv":
         raise InputError(f"--out {args.out}: expected a file name ending in .csv")
@@ -285,16 +285,16 @@ def _slow_breakaways(args: argparse.Namespace) -> None:
         raise InputError(f"{args.plan}: compensated: slow the plan first, then compensate it")
     robot = None if args.robot is None else _from_option("--robot", load_robot, args.robot)
 
-    def tried(feed: float, predicted: PredictedCut) -> None:
-        line = predicted.limits_line() or "keeps the robot's limits"
-        print(f"pace {feed:.2f} at the breakaways: {line}", file=sys.stderr, flush=True)
+    def tried(slowed: Slowed) -> None:
+        line = slowed.predicted.limits_line() or "keeps the robot's limits"
+        print(f"pace {slowed.feed:.2f} {slowed.where}: {line}", file=sys.stderr, flush=True)
 
     slowed = slowed_for_breakaways(
         problem, trajectory, robot, settings, tried, half_width_s=args.half_width_s
     )
     slowed.trajectory.to_csv(args.out)
     print(
-        f"{args.out}: pace {slowed.feed:.2f} at the breakaways, {slowed.trajectory.duration:.2f}"
+        f"{args.out}: pace {slowed.feed:.2f} {slowed.where}, {slowed.trajectory.duration:.2f}"
         f" s (the plan {trajectory.duration:.2f} s); {slowed.predicted.summary()}"
     )
     if not slowed.keeps_limits:

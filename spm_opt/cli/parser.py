@@ -551,7 +551,9 @@ def _execute_parser(commands: argparse._SubParsersAction) -> None:
         choices=PREDICTION_ACTIONS,
         default="warn",
         help="warn: a predicted run that breaks a robot limit (joint speed, acceleration, "
-        "jerk, torque, current) is said on stderr and run; refuse: refuses the run "
+        "jerk, torque, current), or takes a joint's speed past 95 %% of its limit or its "
+        "acceleration or jerk past 90 %% (the margin for what the model does not see), is "
+        "said on stderr and run; refuse: refuses the run "
         "(default warn: the stick-slip of the robot's friction breaks the jerk limit at "
         "the stops of time-optimal plans)",
     )
@@ -722,7 +724,9 @@ def _slow_breakaways_parser(commands: argparse._SubParsersAction) -> None:
         "the run breaks acceleration and jerk limits the plan keeps. This lowers the pace "
         "around each instant a joint starts from rest (the start, landmark stops, "
         "reversals) to the highest pace, within 0.05, whose predicted run on --robot keeps "
-        "every robot limit (each pace tried is a prediction; the lines go to stderr), and "
+        "every robot limit, the joints' speed within 95 % and acceleration and jerk within "
+        "90 % of theirs (each pace tried is a prediction; the lines go to stderr), or, where "
+        "no dip does, the whole plan to the highest uniform pace that does, and "
         "writes that plan to --out with its sidecar. Exits 1 if even a pace of 0.1 does not "
         "keep them (the slowest plan is written all the same).",
     )

@@ -129,6 +129,10 @@ class ExecutionReport(Report):
     not_judged : list of str
         The rules left out because the readings cannot resolve their limits, each with
         why.
+    limit_shares : dict of str to float
+        Each joint's largest speed, acceleration and jerk over the judged rows as a share of
+        its limit, by the judged figures ("theta1 jerk": 0.95); a rule without a limit is
+        left out.
     """
 
     angles: str = "measured"
@@ -143,8 +147,9 @@ class ExecutionReport(Report):
     )
     resolution: dict[str, float] | None = None
     not_judged: list[str] = field(default_factory=list)
+    limit_shares: dict[str, float] = field(default_factory=dict)
 
-    _NOT_IN_TABLE = (*Report._NOT_IN_TABLE, "resolution", "not_judged")
+    _NOT_IN_TABLE = (*Report._NOT_IN_TABLE, "resolution", "not_judged", "limit_shares")
 
     @property
     def accepted(self) -> bool:
@@ -290,9 +295,10 @@ def _judge(
     if angles == "measured":
         resolution = log_resolution(problem, q, run.period_s)
         unresolved = unresolved_rules(resolution, _judged_limits(problem, tube, path))
+    motion = Motion(run.t, q, qd, qdd, jerk, torque, current, peak_speed)
     report = judge(
         problem,
-        Motion(run.t, q, qd, qdd, jerk, torque, current, peak_speed),
+        motion,
         tube,
         path,
         planner=plan.get("planner"),
@@ -319,7 +325,28 @@ def _judge(
         rms_tracking_error_deg=rms,
         resolution=None if resolution is None else resolution.to_dict(),
         not_judged=list(unresolved.values()),
+        limit_shares=joint_limit_shares(problem, motion),
     )
+
+
+def joint_limit_shares(problem: Problem, motion: Motion) -> dict[str, float]:
+    """Each joint's largest speed (``motion.joint_speed()``), acceleration and jerk as a
+    share of its limit in ``problem``, keyed as the judge names them ("theta2 jerk"); a
+    figure without a limit is left out."""
+    limits = problem.limits
+    if len(motion.t) == 0:
+        return {}
+    figures = {
+        "speed": (motion.joint_speed(), limits.max_joint_speed),
+        "acceleration": (motion.qdd, limits.max_joint_acceleration),
+        "jerk": (motion.jerk, limits.max_joint_jerk),
+    }
+    return {
+        f"theta{joint + 1} {figure}": float(np.max(np.abs(values[:, joint]))) / limit
+        for figure, (values, limit) in figures.items()
+        if limit is not None
+        for joint in range(2)
+    }
 
 
 def _judged_limits(problem: Problem, tube: float | None, path: float) -> dict[str, float | None]:

@@ -11,7 +11,9 @@ the run's settings (rate, lead, starting feed) on a virtual clock, from the plan
 :func:`~spm_opt.verify.executed_cut.evaluate_log` judges the plant's true state against the
 whole contour tolerance, as it judges a run's trace, and by the robot's limits
 (:attr:`PredictedCut.broken_limits`: where a joint sticks on its friction and breaks away,
-the run breaks acceleration and jerk limits its plan keeps). A robot file identified from
+the run breaks acceleration and jerk limits its plan keeps). A run predicted within a joint's
+speed, acceleration or jerk limit by less than a margin (:data:`LIMIT_SHARES`) does not
+keep it either (:attr:`PredictedCut.keeps_limits`). A robot file identified from
 the robot's own logs (``spm-opt identify``) makes the model that robot.
 
 What the model cannot know, the prediction does not hold: feed changes made during the run,
@@ -45,6 +47,14 @@ from spm_opt.verify.executed_cut import ExecutionReport, evaluate_log
 from spm_opt.verify.followed import Followed, followed_in_log
 
 _EXECUTION_LOG = logging.getLogger("spm_opt.execution")
+
+LIMIT_SHARES: dict[str, float] = {"speed": 0.95, "acceleration": 0.9, "jerk": 0.9}
+"""The share of each joint's speed, acceleration and jerk limit a predicted run may reach
+and still count as keeping it: the margin for what the model does not see. Measured on the
+family of plants and through the actuators' protocol emulator: a plant's jerk where a joint
+breaks away came to 7 % above its identified model's prediction (101.7 % of the limit
+against 94.8 %), and the real-time timing of the goals added up to 3.6 % to the joint speed
+the model predicted (100.2 % against 96.7 %)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,14 +106,35 @@ class PredictedCut:
         broken = [v for v in self.report.violations if v.rule in ROBOT_RULES]
         return sorted(broken, key=lambda v: -abs(v.worst) / max(abs(v.allowed), 1e-12))
 
+    @property
+    def past_margin(self) -> list[tuple[str, float]]:
+        """The joints' speed, acceleration and jerk the predicted run takes past their share
+        of the limit (:data:`LIMIT_SHARES`), each with its share ("theta2 jerk", 0.96), the
+        largest over its margin first."""
+        shares = self.report.limit_shares
+        past = [(name, share) for name, share in shares.items() if share > _margin(name)]
+        return sorted(past, key=lambda item: -item[1] / _margin(item[0]))
+
+    @property
+    def keeps_limits(self) -> bool:
+        """Whether the predicted run completes, breaks no robot limit and keeps each joint
+        limit's margin (:data:`LIMIT_SHARES`)."""
+        return self.report.completed and not self.broken_limits and not self.past_margin
+
     def limits_line(self) -> str:
         """One line: the robot's limit the predicted run breaks worst and how many more, or
-        "" if it breaks none."""
-        broken = self.broken_limits
-        if not broken:
+        else the joint limit whose margin it takes most of; "" if it keeps them all."""
+        broken, past = self.broken_limits, self.past_margin
+        if broken:
+            more = f", and {len(broken) - 1} more" if len(broken) > 1 else ""
+            return f"predicted run on {self.robot} breaks {broken[0]}{more}"
+        if not past:
             return ""
-        more = f", and {len(broken) - 1} more" if len(broken) > 1 else ""
-        return f"predicted run on {self.robot} breaks {broken[0]}{more}"
+        (name, share), more = past[0], f", and {len(past) - 1} more" if len(past) > 1 else ""
+        return (
+            f"predicted run on {self.robot} takes {name} to {share:.1%} of its limit, past the "
+            f"{_margin(name):.0%} kept for what the model does not see{more}"
+        )
 
     def summary(self) -> str:
         """One line: the predicted distance, where, against the tube."""
@@ -207,6 +238,12 @@ def highest_feed_inside(
         lowest = tried(FEED_STEP)
         return (FEED_STEP, lowest) if lowest.inside else None
     return low, best
+
+
+def _margin(name: str) -> float:
+    """The share of the limit :data:`LIMIT_SHARES` keeps for the figure ``name`` ("theta1
+    jerk")."""
+    return LIMIT_SHARES[name.split()[-1]]
 
 
 def _farthest_at(problem: Problem, angles: np.ndarray) -> str:
