@@ -334,7 +334,7 @@ def limit_lines(rows: list[dict]) -> list[str]:
         f"{past} of {len(runs)} past the margin the prediction keeps "
         f"({', '.join(f'{f} {v:.0%}' for f, v in LIMIT_SHARES.items())}). Of the {breaking} "
         f"that broke a robot limit, the prediction named every limit broken on {foreseen} "
-        f"(broken or within the margin); it named a limit the true run kept on {extra} of "
+        f"(as broken or as past its margin); it named a limit the true run kept on {extra} of "
         f"{len(runs)}."
     ]
 

@@ -18,7 +18,8 @@ the pace cubed), so the broken jerk falls with the pace near those instants, not
 the joints' with their margins (:func:`~spm_opt.verify.predicted_cut.predict_cut`,
 :attr:`~spm_opt.verify.predicted_cut.PredictedCut.keeps_limits`), and the slowed plan is as
 clean as the plan by :func:`~spm_opt.judge.evaluate.evaluate`. Bisection takes the broken
-jerk to fall with the feed. A uniform feed low enough for the same would slow the whole plan.
+jerk to fall with the feed. A uniform feed low enough for the same would slow the whole
+plan: it does so only where no dip keeps the limits.
 """
 
 from __future__ import annotations
