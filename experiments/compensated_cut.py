@@ -47,7 +47,9 @@ from spm_opt.verify.predicted_cut import (
     LIMIT_SHARES,
     PredictedCut,
     highest_feed_inside,
+    past_margin,
     predict_cut,
+    worst_by_figure,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,7 +109,7 @@ def true_run(
 def robot_rules_unkept(predicted: PredictedCut) -> list[str]:
     """The robot's rules the predicted run breaks, or whose margin it takes (the joints'
     speed, acceleration and jerk past :data:`LIMIT_SHARES` of their limits), by name."""
-    past = {f"joint {name.split()[-1]}" for name, _ in predicted.past_margin}
+    past = {f"joint {figure}" for figure in worst_by_figure(dict(predicted.past_margin))}
     return sorted({v.rule for v in predicted.broken_limits} | past)
 
 
@@ -316,16 +318,9 @@ def limit_lines(rows: list[dict]) -> list[str]:
         breaking += bool(broken)
         foreseen += bool(broken) and broken <= set(predicted)
         extra += bool(set(predicted) - broken)
-        past += any(
-            share > LIMIT_SHARES[name.split()[-1]] for name, share in run["limit_shares"].items()
-        )
+        past += bool(past_margin(run["limit_shares"]))
     worst = {
-        figure: max(
-            share
-            for run, _ in runs
-            for name, share in run["limit_shares"].items()
-            if name.endswith(figure)
-        )
+        figure: max(worst_by_figure(run["limit_shares"])[figure] for run, _ in runs)
         for figure in LIMIT_SHARES
     }
     shares = "; ".join(f"{figure} {share:.1%}" for figure, share in worst.items())

@@ -59,7 +59,7 @@ from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.planner_style import labelled_handles
 from spm_opt.verify.breakaway import slowed_for_breakaways
 from spm_opt.verify.executed_cut import evaluate_log
-from spm_opt.verify.predicted_cut import predict_cut
+from spm_opt.verify.predicted_cut import predict_cut, worst_by_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")
@@ -170,19 +170,9 @@ def run_one(
         duration_s=plan.duration,
         pace_at_breakaways=plan.metadata.get("slowed", {}).get("feed", 1.0),
         slowed_throughout=plan.metadata.get("slowed", {}).get("uniform", False),
-        worst_share_of_limit=_worst_shares(true.limit_shares),
-        predicted_share_of_limit=_worst_shares(predicted.report.limit_shares),
+        worst_share_of_limit=worst_by_figure(true.limit_shares),
+        predicted_share_of_limit=worst_by_figure(predicted.report.limit_shares),
     )
-
-
-def _worst_shares(shares: dict[str, float]) -> dict[str, float]:
-    """The worst over the joints of each figure's share of its limit, from a report's
-    ``limit_shares`` ("theta2 jerk": 0.9 → "jerk": 0.9)."""
-    worst: dict[str, float] = {}
-    for name, share in shares.items():
-        kind = name.split()[-1]
-        worst[kind] = max(worst.get(kind, 0.0), share)
-    return worst
 
 
 def _robot_limits(violations: list[Violation]) -> list[str]:

@@ -111,9 +111,7 @@ class PredictedCut:
         """The joints' speed, acceleration and jerk the predicted run takes past their share
         of the limit (:data:`LIMIT_SHARES`), each with its share ("theta2 jerk", 0.96), the
         largest over its margin first."""
-        shares = self.report.limit_shares
-        past = [(name, share) for name, share in shares.items() if share > _margin(name)]
-        return sorted(past, key=lambda item: -item[1] / _margin(item[0]))
+        return past_margin(self.report.limit_shares)
 
     @property
     def keeps_limits(self) -> bool:
@@ -240,10 +238,32 @@ def highest_feed_inside(
     return low, best
 
 
+def past_margin(shares: dict[str, float]) -> list[tuple[str, float]]:
+    """Of a report's ``limit_shares`` ("theta2 jerk": 0.96), those past their share of the
+    limit (:data:`LIMIT_SHARES`), the largest over its margin first."""
+    past = [(name, share) for name, share in shares.items() if share > _margin(name)]
+    return sorted(past, key=lambda item: -item[1] / _margin(item[0]))
+
+
+def worst_by_figure(shares: dict[str, float]) -> dict[str, float]:
+    """Of a report's ``limit_shares``, the worst over the joints of each figure ("theta2
+    jerk": 0.9 → "jerk": 0.9)."""
+    worst: dict[str, float] = {}
+    for name, share in shares.items():
+        figure = _figure(name)
+        worst[figure] = max(worst.get(figure, 0.0), share)
+    return worst
+
+
+def _figure(name: str) -> str:
+    """The figure a limit share is of: "theta1 jerk" → "jerk"."""
+    return name.split()[-1]
+
+
 def _margin(name: str) -> float:
     """The share of the limit :data:`LIMIT_SHARES` keeps for the figure ``name`` ("theta1
     jerk")."""
-    return LIMIT_SHARES[name.split()[-1]]
+    return LIMIT_SHARES[_figure(name)]
 
 
 def _farthest_at(problem: Problem, angles: np.ndarray) -> str:
