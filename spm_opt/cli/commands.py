@@ -280,7 +280,9 @@ def _slow_breakaways(args: argparse.Namespace) -> None:
     trajectory = Trajectory.from_csv(args.plan)
     check_plan_made_for(problem, trajectory, args.other_problem)
     if "slowed" in trajectory.metadata:
-        raise InputError(f"{args.plan}: already slowed at its breakaways: slow the plan itself")
+        raise InputError(
+            f"{args.plan}: already slowed (at its breakaways or throughout): slow the plan itself"
+        )
     if "compensation" in trajectory.metadata:
         raise InputError(f"{args.plan}: compensated: slow the plan first, then compensate it")
     robot = None if args.robot is None else _from_option("--robot", load_robot, args.robot)
