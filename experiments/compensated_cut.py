@@ -17,7 +17,9 @@ true cut from the plant's true state), the stream compensated on the identified 
 (:func:`~spm_opt.verify.compensation.compensate`) and executed again. ``--part k/n``
 takes every n-th plant from the k-th (for two processes on two cores); ``--merge`` joins
 the parts' JSON into the tables. Writes ``compensated_cut.json`` (or a part's), and with
-all parts ``compensated_cut.md`` and ``compensated_cut.png`` into ``--out``.
+all parts ``compensated_cut.md``, ``compensated_cut.png`` (the cuts) and
+``compensated_cut_limits.png`` (each true run's share of the joints' limits against its
+prediction's: the margin's measure) into ``--out``.
 """
 
 from __future__ import annotations
@@ -58,6 +60,10 @@ IDENTIFY_RUN = ExecutionSettings(
     rate_hz=100.0, current_reads_per_cycle=10, max_following_error_rad=np.radians(5.0)
 )
 """The excitation's run, as experiments/identification_coverage.py runs it."""
+
+MARGIN_FLOOR = 0.5
+"""The margin is measured on the joints' figures predicted at this share of their limit or
+more, where a margin matters."""
 
 
 def progress(message: str) -> None:
@@ -183,7 +189,7 @@ def main() -> None:
                 compensated = true_run(problem, compensation.plan, plant, work, f"{name}-comp")
                 kept = compensation.predicted
                 slowed = None
-                if kept.broken_limits:  # slow where the joints break away, then compensate
+                if not kept.keeps_limits:  # slow where the joints break away, then compensate
                     started = time.perf_counter()
                     slowing = slowed_for_breakaways(problem, plan, model)
                     if slowing.feed < 1.0:
@@ -196,11 +202,13 @@ def main() -> None:
                             "predicted_mm": learned.predicted.deviation_mm,
                             "predicted_inside": learned.predicted.inside,
                             "predicted_broken": robot_rules_unkept(learned.predicted),
+                            "predicted_shares": learned.predicted.report.limit_shares,
                             "compute_s": time.perf_counter() - started,
                             "run": true_run(problem, learned.plan, plant, work, f"{name}-slowed"),
                             "lead_predicted_mm": slowing.predicted.deviation_mm,
                             "lead_predicted_inside": slowing.predicted.inside,
                             "lead_predicted_broken": robot_rules_unkept(slowing.predicted),
+                            "lead_predicted_shares": slowing.predicted.report.limit_shares,
                             "lead_run": None,
                         }
                         if slowed["predicted_broken"] and slowing.predicted.inside:
@@ -219,6 +227,7 @@ def main() -> None:
                             "feed": feed,
                             "predicted_mm": at_feed.deviation_mm,
                             "predicted_broken": robot_rules_unkept(at_feed),
+                            "predicted_shares": at_feed.report.limit_shares,
                             "run": run,
                         }
                 row = {
@@ -231,6 +240,7 @@ def main() -> None:
                     "predicted_lead_mm": predicted.deviation_mm,
                     "predicted_lead_inside": predicted.inside,
                     "predicted_lead_broken": robot_rules_unkept(predicted),
+                    "predicted_lead_shares": predicted.report.limit_shares,
                     "lead": lead,
                     "iterations_mm": [i.deviation_mm for i in compensation.iterations],
                     "corrections": compensation.kept,
@@ -238,6 +248,7 @@ def main() -> None:
                     "predicted_compensated_mm": kept.deviation_mm,
                     "predicted_compensated_inside": kept.inside,
                     "predicted_compensated_broken": robot_rules_unkept(kept),
+                    "predicted_compensated_shares": kept.report.limit_shares,
                     "compensated": compensated,
                     "slowed": slowed,
                     "highest_feed": slower,
@@ -334,6 +345,64 @@ def limit_lines(rows: list[dict]) -> list[str]:
     ]
 
 
+def predicted_and_true(rows: list[dict]) -> list[tuple[str, str, dict, dict]]:
+    """Every true run of the rows with its prediction's joint limit shares and its own:
+    (the plan, "plant 1 bone_flap ocp-min-jerk"; which run, "lead", "compensated",
+    "slowed", "slowed, led" or "feed"; predicted; true)."""
+    pairs = []
+    for r in rows:
+        name = f"plant {r['plant']} {r['flap'].removeprefix('craniotomy_')} {r['planner']}"
+        runs = [
+            ("lead", r["predicted_lead_shares"], r["lead"]),
+            ("compensated", r["predicted_compensated_shares"], r["compensated"]),
+        ]
+        if r["slowed"]:
+            runs.append(("slowed", r["slowed"]["predicted_shares"], r["slowed"]["run"]))
+            if r["slowed"]["lead_run"]:
+                lead = r["slowed"]["lead_predicted_shares"], r["slowed"]["lead_run"]
+                runs.append(("slowed, led", *lead))
+        if r["highest_feed"]:
+            runs.append(("feed", r["highest_feed"]["predicted_shares"], r["highest_feed"]["run"]))
+        pairs += [(name, kind, shares, run["limit_shares"]) for kind, shares, run in runs]
+    return pairs
+
+
+def margin_line(rows: list[dict]) -> str:
+    """How far each joint figure's true share of its limit came above its prediction's, on
+    the runs predicted at :data:`MARGIN_FLOOR` of the limit or more, against the margin
+    :data:`LIMIT_SHARES` keeps; one line."""
+    parts, failed = [], 0
+    pairs = predicted_and_true(rows)
+    for figure, margin in LIMIT_SHARES.items():
+        ratios = [
+            (true[name] / predicted[name], f"{plan}, {kind}")
+            for plan, kind, predicted, true in pairs
+            for name in predicted
+            if name.endswith(figure) and predicted[name] >= MARGIN_FLOOR
+        ]
+        failed += sum(
+            predicted[name] <= margin < 1.0 < true[name]
+            for _, _, predicted, true in pairs
+            for name in predicted
+            if name.endswith(figure)
+        )
+        if not ratios:
+            parts.append(f"{figure}: none predicted at {MARGIN_FLOOR:.0%} or more")
+            continue
+        worst, where = max(ratios)
+        parts.append(
+            f"{figure}, margin {margin:.0%} (enough while the ratio stays under "
+            f"{1 / margin:.3f}): at most {worst:.3f} ({where}), median "
+            f"{np.median([v for v, _ in ratios]):.3f}, over {len(ratios)}"
+        )
+    return (
+        f"- The margin, over {len(pairs)} true runs: a joint figure's true share of its limit "
+        f"over its predicted share, where the prediction reached {MARGIN_FLOOR:.0%} of the "
+        f"limit or more: " + "; ".join(parts) + f". Joint figures predicted within their "
+        f"margin whose true run broke the limit: {failed}."
+    )
+
+
 def summary_lines(rows: list[dict]) -> list[str]:
     """What the rows of one speed say, a line each."""
     runs = [lab_run(r)[:3] for r in rows]
@@ -389,6 +458,7 @@ def summary_lines(rows: list[dict]) -> list[str]:
         + (", ".join(f"{rule} on {n}" for rule, n in sorted(broken.items())) or "none")
         + ".",
         *limit_lines(rows),
+        margin_line(rows),
         f"- Compensation's compute: median {np.median(compute):.0f} s, at most "
         f"{max(compute):.0f} s a plan; the compensated plans are as long as their plans.",
     ]
@@ -524,11 +594,16 @@ def write_tables(args: argparse.Namespace, rows: list[dict]) -> None:
         "compensated stream's predicted cut leaves the tube, and no slowed stream's is inside, "
         "the lab's run is the lead plan at the highest feed predicted inside "
         "(`spm-opt predict --highest-feed`). Completed: lead / compensated / the lab's run "
-        "where it is neither.\n\n" + "\n".join(sections)
+        "where it is neither.\n\n"
+        "## Every speed\n\n"
+        f"{margin_line(rows)}\n\n"
+        "![Each true run's share of the joints' limits against its prediction's]"
+        "(compensated_cut_limits.png)\n\n" + "\n".join(sections)
     )
     (args.out / "compensated_cut.md").write_text(text, encoding="utf-8")
     (args.out / "compensated_cut.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
     figure(rows).savefig(args.out / "compensated_cut.png", dpi=120)
+    limits_figure(rows).savefig(args.out / "compensated_cut_limits.png", dpi=120)
     print(text)
 
 
@@ -610,6 +685,54 @@ def figure(rows: list[dict]) -> Figure:
         title="true cut: compensated against the lead alone",
     )
     right.legend(fontsize=8)
+    return fig
+
+
+def limits_figure(rows: list[dict]) -> Figure:
+    """For the joints' speed, acceleration and jerk: each true run's share of the limit
+    against its prediction's, with the limit and the margin the prediction keeps."""
+    fig = Figure(figsize=(13, 4.5), layout="constrained")
+    pairs = predicted_and_true(rows)
+    colours = {
+        "lead": "tab:orange",
+        "compensated": "tab:green",
+        "slowed": "tab:red",
+        "slowed, led": "tab:purple",
+        "feed": "tab:blue",
+    }
+    for axis, (figure, margin) in zip(fig.subplots(1, 3), LIMIT_SHARES.items(), strict=True):
+        for kind, colour in colours.items():
+            points = [
+                (predicted[name], true[name])
+                for _, run, predicted, true in pairs
+                if run == kind
+                for name in predicted
+                if name.endswith(figure)
+            ]
+            if points:
+                x, y = np.array(points).T
+                axis.scatter(100 * x, 100 * y, s=14, c=colour, label=kind)
+        shares = [max(p[n], t[n]) for _, _, p, t in pairs for n in p if n.endswith(figure)]
+        top = 100 * max(1.1, *shares)
+        axis.plot([0, top], [0, top], color="0.5", lw=1, label="true = predicted")
+        axis.axhline(100, color="k", lw=1, label="the limit")
+        axis.axvline(100 * margin, color="k", ls="--", lw=1, label=f"margin kept ({margin:.0%})")
+        axis.fill_between(
+            [0, 100 * margin],
+            100,
+            top,
+            color="tab:red",
+            alpha=0.12,
+            label="margin kept, limit broken",
+        )
+        axis.set(
+            xlim=(0, top),
+            ylim=(0, top),
+            xlabel=f"predicted {figure}, share of the limit (%)",
+            ylabel=f"true {figure}, share of the limit (%)",
+            title=f"joint {figure}",
+        )
+        axis.legend(loc="lower right", fontsize=8)
     return fig
 
 

@@ -1,7 +1,7 @@
 """What the robot cuts: every planner's plan executed, with and without the led goals.
 
     python experiments/executed_cut.py --out docs/executed_cut [--backend sim|emulator]
-                                       [--planners toppra,ocp-min-time]
+                                       [--planners toppra,ocp-min-time] [--repeats N]
 
 For ``craniotomy_hardware.toml`` and the paper's ``craniotomy_bone_flap.toml``, each
 planner's plan runs on a robot that is not the planning model (the plant is
@@ -30,7 +30,10 @@ run's pace, its duration, its true cut, the robot limits it broke, and
 its worst joint speed, acceleration and jerk against their limits. ``--backend
 emulator`` runs the same through the real Dynamixel SDK against the emulated actuators, in
 real time (about two minutes; keep the machine otherwise idle:
-a loop that stalls for 0.2 s is a following error). Writes ``executed_cut.md``,
+a loop that stalls for 0.2 s is a following error). ``--repeats N`` makes each run N
+times: in real time, when each goal reaches the actuators differs from run to run, and a
+table gives each figure's range over the runs against the prediction, which does not
+change. Writes ``executed_cut.md``,
 ``executed_cut.json`` and ``executed_cut.png`` into ``--out``.
 """
 
@@ -59,7 +62,7 @@ from spm_opt.model.params import DEG, MM, Robot
 from spm_opt.report.planner_style import labelled_handles
 from spm_opt.verify.breakaway import slowed_for_breakaways
 from spm_opt.verify.executed_cut import evaluate_log
-from spm_opt.verify.predicted_cut import predict_cut, worst_by_figure
+from spm_opt.verify.predicted_cut import PredictedCut, predict_cut, worst_by_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ("craniotomy_hardware", "craniotomy_bone_flap")
@@ -97,6 +100,7 @@ class Row:
     worst_share_of_limit: dict[str, float]
     predicted_share_of_limit: dict[str, float]
     slowed_throughout: bool = False
+    repeat: int = 0
 
 
 def _plants(calibrated: bool) -> Iterator[tuple[str, Robot]]:
@@ -135,21 +139,23 @@ def run_one(
     plant: tuple[str, Robot],
     tracking: str,
     work: Path,
-    model: Robot | None,
+    predicted: PredictedCut,
+    repeat: int = 0,
 ) -> Row:
-    """Execute ``plan`` with ``tracking`` on ``plant`` and judge the run; its cut predicted
-    on ``model`` (default: the plant's own file). Tracking "slowed" is the lead on the plan
+    """Execute ``plan`` with ``tracking`` on ``plant`` and judge the run (the ``repeat``-th
+    of the same), beside its ``predicted`` cut. Tracking "slowed" is the lead on the plan
     slowed at its breakaways."""
-    name = f"{problem.name}-{plan.metadata['planner']}-{plant[0].replace(' ', '_')}-{tracking}"
+    name = (
+        f"{problem.name}-{plan.metadata['planner']}-{plant[0].replace(' ', '_')}-{tracking}"
+        f"-{repeat}"
+    )
     log, trace = work / f"{name}.csv", work / f"{name}.npz"
-    settings = so.ExecutionSettings(tracking="lead" if tracking == SLOWED else tracking)
     backend: Backend
     with _backend(kind, problem, plan, plant[1], trace) as backend:
-        result = so.execute(plan, backend, problem, log, settings)
+        result = so.execute(plan, backend, problem, log, _settings(tracking))
     reports = evaluate_log(problem, log, trace)
     true = reports.true
     assert true is not None
-    predicted = predict_cut(problem, plan, model or plant[1], settings)
     tube = contour_tube(problem, executed=True)
     return Row(
         problem=problem.name,
@@ -172,7 +178,13 @@ def run_one(
         slowed_throughout=plan.metadata.get("slowed", {}).get("uniform", False),
         worst_share_of_limit=worst_by_figure(true.limit_shares),
         predicted_share_of_limit=worst_by_figure(predicted.report.limit_shares),
+        repeat=repeat,
     )
+
+
+def _settings(tracking: str) -> so.ExecutionSettings:
+    """The executor's settings of a run with ``tracking`` ("slowed": the lead)."""
+    return so.ExecutionSettings(tracking="lead" if tracking == SLOWED else tracking)
 
 
 def _robot_limits(violations: list[Violation]) -> list[str]:
@@ -187,10 +199,12 @@ def run(
     work: Path,
     model: Robot | None,
     lab_robot: Robot | None = None,
+    repeats: int = 1,
 ) -> list[Row]:
-    """Every planner's clean plan of each problem, on each plant, with each tracking, the
-    cut predicted on ``model`` (default: each plant's own file). With ``lab_robot`` the
-    problems' robot is replaced by it: it plans, calibrates the encoders and predicts."""
+    """Every planner's clean plan of each problem, on each plant, with each tracking, run
+    ``repeats`` times, the cut predicted on ``model`` (default: each plant's own file). With
+    ``lab_robot`` the problems' robot is replaced by it: it plans, calibrates the encoders
+    and predicts."""
     rows = []
     calibrated = lab_robot is not None and not lab_robot.calibration.is_ideal
     for problem_name in problems:
@@ -209,24 +223,29 @@ def run(
                     runs.append((SLOWED, slowed.trajectory))
             for plant in _plants(calibrated):
                 for tracking, trajectory in runs:
-                    row = run_one(kind, problem, trajectory, plant, tracking, work, model)
-                    print(
-                        f"{problem_name} {planner} ({plant[0]}, {tracking}): "
-                        f"{'completed' if row.completed else row.outcome}; tracking "
-                        f"{row.true_tracking_error_deg:.3f} deg, cut "
-                        f"{row.true_deviation_mm:.3f} mm (predicted "
-                        f"{row.predicted_deviation_mm:.3f})",
-                        file=sys.stderr,
-                        flush=True,
-                    )
-                    rows.append(row)
+                    on = model or plant[1]
+                    predicted = predict_cut(problem, trajectory, on, _settings(tracking))
+                    for repeat in range(repeats):
+                        row = run_one(
+                            kind, problem, trajectory, plant, tracking, work, predicted, repeat
+                        )
+                        print(
+                            f"{problem_name} {planner} ({plant[0]}, {tracking}, run "
+                            f"{repeat + 1}): {'completed' if row.completed else row.outcome}; "
+                            f"tracking {row.true_tracking_error_deg:.3f} deg, cut "
+                            f"{row.true_deviation_mm:.3f} mm (predicted "
+                            f"{row.predicted_deviation_mm:.3f})",
+                            file=sys.stderr,
+                            flush=True,
+                        )
+                        rows.append(row)
     return rows
 
 
 def table(rows: list[Row]) -> str:
     """The runs as markdown: none beside lead for each plan and plant."""
     by_key: dict[tuple[str, str, str], dict[str, Row]] = {}
-    for row in rows:
+    for row in _first_runs(rows):
         by_key.setdefault((row.problem, row.planner, row.plant), {})[row.tracking] = row
     lines = []
     for (problem, planner, plant), pair in by_key.items():
@@ -267,16 +286,16 @@ def table(rows: list[Row]) -> str:
         "robot limits broken, true (lead)",
         "robot limits broken, predicted (lead)",
     )
-    return "\n".join(markdown_table(header, lines))
+    return _table_or_nothing(header, lines)
 
 
 def slowed_table(rows: list[Row]) -> str:
     """The runs slowed at their breakaways beside the led plan's, as markdown ("" if none)."""
     lines = []
-    for slowed in (r for r in rows if r.tracking == SLOWED):
+    for slowed in (r for r in _first_runs(rows) if r.tracking == SLOWED):
         lead = next(
             r
-            for r in rows
+            for r in _first_runs(rows)
             if (r.problem, r.planner, r.plant, r.tracking)
             == (slowed.problem, slowed.planner, slowed.plant, "lead")
         )
@@ -302,8 +321,6 @@ def slowed_table(rows: list[Row]) -> str:
                 shares(slowed.worst_share_of_limit),
             )
         )
-    if not lines:
-        return ""
     header = (
         "problem",
         "planner",
@@ -319,7 +336,59 @@ def slowed_table(rows: list[Row]) -> str:
         "the same, predicted (slowed)",
         "the same, true (slowed)",
     )
-    return "\n".join(markdown_table(header, lines))
+    return _table_or_nothing(header, lines)
+
+
+def repeats_table(rows: list[Row]) -> str:
+    """Each run made more than once: its predicted worst joint speed, acceleration and jerk
+    against their limits beside the true runs' range, and the true cut's range, as markdown
+    ("" if no run was repeated)."""
+    runs: dict[tuple[str, str, str, str], list[Row]] = {}
+    for row in rows:
+        runs.setdefault((row.problem, row.planner, row.plant, row.tracking), []).append(row)
+    lines = []
+    for key, repeated in runs.items():
+        if len(repeated) < 2:
+            continue
+        predicted = repeated[0].predicted_share_of_limit
+        cells = []
+        for figure, share in predicted.items():
+            true = [r.worst_share_of_limit[figure] for r in repeated]
+            cells.append(
+                f"{figure} {share:.1%}: {min(true):.1%}–{max(true):.1%} "
+                f"(×{min(true) / share:.3f}–{max(true) / share:.3f})"
+            )
+        cuts = [r.true_deviation_mm for r in repeated]
+        lines.append(
+            (
+                *key,
+                str(len(repeated)),
+                f"{sum(r.completed for r in repeated)}",
+                "; ".join(cells),
+                f"{repeated[0].predicted_deviation_mm:.4f}: {min(cuts):.4f}–{max(cuts):.4f}",
+            )
+        )
+    header = (
+        "problem",
+        "planner",
+        "plant",
+        "tracking",
+        "runs",
+        "completed",
+        "worst joint figure of its limit, predicted: true, least–most (true over predicted)",
+        "cut off the contour, predicted: true, least–most (mm)",
+    )
+    return _table_or_nothing(header, lines)
+
+
+def _table_or_nothing(header: tuple[str, ...], lines: list[tuple[str, ...]]) -> str:
+    """The lines under the header as markdown, or "" if there are none."""
+    return "\n".join(markdown_table(header, lines)) if lines else ""
+
+
+def _first_runs(rows: list[Row]) -> list[Row]:
+    """Each run's first making, of ``rows``."""
+    return [r for r in rows if r.repeat == 0]
 
 
 def figure(rows: list[Row], path: Path) -> None:
@@ -331,7 +400,9 @@ def figure(rows: list[Row], path: Path) -> None:
     fig = Figure(figsize=(13, 4.2 * len(problems) + 0.6), layout="constrained")
     axes = fig.subplots(len(problems), 2, squeeze=False)
     for (tracking, cut), problem in zip(axes, problems, strict=True):
-        mine = [r for r in rows if r.problem == problem and r.plant == "prototype_plant"]
+        mine = [
+            r for r in _first_runs(rows) if r.problem == problem and r.plant == "prototype_plant"
+        ]
         _tracking_bars(tracking, mine)
         _cut_bars(cut, mine)
         tracking.set_title(f"{problem}: largest true tracking error", fontsize=10)
@@ -420,7 +491,16 @@ def main(argv: list[str] | None = None) -> int:
         help="the lab's robot file, identified from the plant and calibrated against it: "
         "it replaces the problems' robot, so it plans, calibrates the encoders and predicts",
     )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="how many times each run is made (through the emulator, in real time, the "
+        "goals' timing differs from run to run), from 1 to 20",
+    )
     args = parser.parse_args(argv)
+    if not 1 <= args.repeats <= 20:
+        parser.error(f"--repeats {args.repeats}: expected a whole number from 1 to 20")
     if args.lab_robot is not None and args.model is not None:
         parser.error("--model: not with --lab-robot, which is also the prediction's model")
     lab_robot = None if args.lab_robot is None else so.load_robot(args.lab_robot)
@@ -428,7 +508,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as work:
         problems, planners = args.problems.split(","), args.planners.split(",")
-        rows = run(args.backend, problems, planners, Path(work), model, lab_robot)
+        rows = run(args.backend, problems, planners, Path(work), model, lab_robot, args.repeats)
     data: list[dict[str, Any]] = [dataclasses.asdict(r) for r in rows]
     (args.out / "executed_cut.json").write_text(json.dumps(data, indent=2) + "\n")
     predicted_on = "" if args.model is None else f" --model {args.model}"
@@ -438,7 +518,10 @@ def main(argv: list[str] | None = None) -> int:
     text = (
         f"# The executed cut ({args.backend})\n\n"
         "`python experiments/executed_cut.py --out DIR --backend "
-        f"{args.backend} --planners {args.planners}{predicted_on}` wrote this. "
+        f"{args.backend} --planners {args.planners}{predicted_on}"
+        + ("" if args.problems == ",".join(PROBLEMS) else f" --problems {args.problems}")
+        + ("" if args.repeats == 1 else f" --repeats {args.repeats}")
+        + "` wrote this. "
         + ("" if args.lab_robot is None else f"Planned and calibrated on `{model_file}`. ")
         + "Predicted on "
         + ("each plant's own file" if model is None else f"`{model_file}`")
@@ -451,6 +534,13 @@ def main(argv: list[str] | None = None) -> int:
         text += (
             "\nEach plan slowed at its breakaways (or throughout, where no dip keeps the "
             "limits) on the same robot file, led (`spm-opt slow-breakaways`):\n\n" + slowed + "\n"
+        )
+    repeated = repeats_table(rows)
+    if repeated:
+        text += (
+            f"\nEach run made {args.repeats} times (the tables above give the first):\n\n"
+            + repeated
+            + "\n"
         )
     (args.out / "executed_cut.md").write_text(text)
     figure(rows, args.out / "executed_cut.png")

@@ -92,6 +92,19 @@ def test_command_writes_the_table_the_summary_and_the_figures(tmp_path, failing_
     assert progress.splitlines()[-1] == "spm-opt: 1 of 3 planners failed: always-fails"
 
 
+def test_the_executed_cut_study_refuses_a_repeat_count_out_of_range(tmp_path):
+    out = tmp_path / "study"
+    script = [sys.executable, str(ROOT / "experiments" / "executed_cut.py"), "--out", str(out)]
+    result = subprocess.run(
+        [*script, "--repeats", "0"], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert result.returncode == 2
+    assert result.stderr.splitlines()[-1].endswith(
+        "--repeats 0: expected a whole number from 1 to 20"
+    )
+    assert not out.exists()
+
+
 def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "comparison"
     problem = ROOT / "problems" / "craniotomy_bone_flap.toml"
@@ -108,7 +121,10 @@ def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys)
         ["calibrate_prototype.py"],
         ["hardware_verification.py"],
         pytest.param(["feed_hold.py", "--holds", "2"], marks=pytest.mark.slow),
-        ["executed_cut.py", "--planners", "toppra", "--problems", "craniotomy_hardware"],
+        [
+            "executed_cut.py",
+            *("--planners", "toppra", "--problems", "craniotomy_hardware", "--repeats", "2"),
+        ],
         pytest.param(
             ["hardware_verification.py", "--backend", "emulator"],
             marks=[pytest.mark.slow, pytest.mark.real_time],
@@ -162,6 +178,7 @@ def test_every_experiment_script_runs(tmp_path, command):
         rows = json.loads((tmp_path / "compensated_cut.json").read_text())
         assert len(rows) == 6 and "true cut inside" in (tmp_path / "compensated_cut.md").read_text()
         assert (tmp_path / "compensated_cut.png").is_file()
+        assert (tmp_path / "compensated_cut_limits.png").is_file()
     if command[0] == "kinematic_calibration.py":
         study = json.loads((tmp_path / "kinematic_calibration.json").read_text())
         assert study["robots"] == 3 and set(study["coverage_40_poses"]) >= {"encoder_zero_1"}
@@ -187,8 +204,18 @@ def test_every_experiment_script_runs(tmp_path, command):
         assert (tmp_path / "executed_cut.png").is_file()
     if command[0] == "executed_cut.py":
         rows = json.loads((tmp_path / "executed_cut.json").read_text())
-        assert [r["plant"] for r in rows] == ["prototype_plant"] * 2 + ["offsets at zero"] * 2
-        none, lead = rows[:2]
+        assert [r["plant"] for r in rows] == ["prototype_plant"] * 4 + ["offsets at zero"] * 4
+        assert [(r["tracking"], r["repeat"]) for r in rows[:4]] == [
+            ("none", 0),
+            ("none", 1),
+            ("lead", 0),
+            ("lead", 1),
+        ]
+        for first, again in zip(rows[::2], rows[1::2], strict=True):  # the simulated robot
+            assert again["worst_share_of_limit"] == first["worst_share_of_limit"]  # repeats
+            assert again["true_deviation_mm"] == first["true_deviation_mm"]  # a run exactly
+        assert "Each run made 2 times" in (tmp_path / "executed_cut.md").read_text()
+        none, lead = rows[0], rows[2]
         assert lead["completed"] and lead["tracking"] == "lead" and none["tracking"] == "none"
         assert lead["true_tracking_error_deg"] < 0.2 * none["true_tracking_error_deg"]
         assert (tmp_path / "executed_cut.png").is_file()

@@ -75,7 +75,7 @@ FIGURE_WRITERS = {
     ),
     "experiments/compensated_cut.py": (
         "test_figures.py",
-        "test_the_compensated_cut_figure_keeps_the_rules",
+        "test_the_compensated_cut_figures_keep_the_rules",
     ),
 }
 """Every file that writes a figure, and the test that saves its figures (checked)."""
@@ -569,7 +569,22 @@ def test_the_frames_figure_of_the_docs_keeps_the_rules() -> None:
     assert figure_faults(module.frames_figure(problem)) == []
 
 
-def test_the_compensated_cut_figure_keeps_the_rules(tmp_path: Path) -> None:
+def _shares(scale: float) -> dict[str, float]:
+    """A run's joint limit shares, ``scale`` of a spread of them."""
+    base = {"speed": 0.3, "acceleration": 0.6, "jerk": 0.8}
+    return {
+        f"theta{joint} {figure}": scale * share * (1.0 + 0.1 * joint)
+        for figure, share in base.items()
+        for joint in (1, 2)
+    }
+
+
+def _run(true_mm: float, scale: float) -> dict:
+    """A true run: its cut (mm) and its joint limit shares."""
+    return {"true_mm": true_mm, "limit_shares": _shares(scale)}
+
+
+def test_the_compensated_cut_figures_keep_the_rules(tmp_path: Path) -> None:
     rows = [
         {
             "plant": plant,
@@ -577,18 +592,26 @@ def test_the_compensated_cut_figure_keeps_the_rules(tmp_path: Path) -> None:
             "planner": planner,
             "tube_mm": 0.12,
             "predicted_lead_mm": 0.05 + 0.01 * plant,
-            "lead": {"true_mm": 0.052 + 0.01 * plant},
+            "predicted_lead_shares": _shares(1.0 + 0.05 * plant),
+            "lead": _run(0.052 + 0.01 * plant, 1.02 + 0.05 * plant),
             "predicted_compensated_mm": 0.03 + 0.01 * plant,
-            "compensated": {"true_mm": 0.031 + 0.01 * plant},
+            "predicted_compensated_shares": _shares(1.1),
+            "compensated": _run(0.031 + 0.01 * plant, 1.12),
             "slowed": {
                 "predicted_mm": 0.02 + 0.01 * plant,
-                "run": {"true_mm": 0.021},
+                "predicted_shares": _shares(0.8),
+                "run": _run(0.021, 0.82),
                 "lead_predicted_mm": 0.025,
-                "lead_run": {"true_mm": 0.026} if plant == 1 else None,
+                "lead_predicted_shares": _shares(0.7),
+                "lead_run": _run(0.026, 0.71) if plant == 1 else None,
             }
             if planner == "toppra"
             else None,
-            "highest_feed": {"predicted_mm": 0.11, "run": {"true_mm": 0.112}}
+            "highest_feed": {
+                "predicted_mm": 0.11,
+                "predicted_shares": _shares(0.5),
+                "run": _run(0.112, 0.5),
+            }
             if plant == 2 and planner == "ocp-min-time"
             else None,
         }
@@ -596,6 +619,7 @@ def test_the_compensated_cut_figure_keeps_the_rules(tmp_path: Path) -> None:
         for flap in ("craniotomy_bone_flap", "craniotomy_five_landmarks")
         for planner in ("toppra", "ocp-min-time")
     ]
-    figure = _experiment("compensated_cut").figure(rows)
-    figure.savefig(tmp_path / "compensated_cut.png")  # checked as it is saved
-    assert (tmp_path / "compensated_cut.png").stat().st_size > 10_000
+    study = _experiment("compensated_cut")
+    for name, figure in (("cut", study.figure(rows)), ("limits", study.limits_figure(rows))):
+        figure.savefig(tmp_path / f"{name}.png")  # checked as it is saved
+        assert (tmp_path / f"{name}.png").stat().st_size > 10_000

@@ -54,7 +54,13 @@ and still count as keeping it: the margin for what the model does not see. Measu
 family of plants and through the actuators' protocol emulator: a plant's jerk where a joint
 breaks away came to 7 % above its identified model's prediction (101.7 % of the limit
 against 94.8 %), and the real-time timing of the goals added up to 3.6 % to the joint speed
-the model predicted (100.2 % against 96.7 %)."""
+the model predicted (100.2 % against 96.7 %). Over the family study's 266 true runs
+(experiments/compensated_cut.py), where a figure was predicted at half its limit or more,
+the true share came to at most 1.074 times the predicted for jerk and 1.115 for
+acceleration (once: 95.8 % against 85.9 %); no figure predicted within its margin broke the
+limit on the true run. Through the emulator, over 8 runs of each hardware plan, the joint
+speed came to at most 1.032 times its prediction, and the jerk, in single runs whose goals
+arrived late, up to 1.51 times."""
 
 
 @dataclasses.dataclass(frozen=True)
