@@ -30,6 +30,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -345,26 +346,69 @@ def limit_lines(rows: list[dict]) -> list[str]:
     ]
 
 
-def predicted_and_true(rows: list[dict]) -> list[tuple[str, str, dict, dict]]:
-    """Every true run of the rows with its prediction's joint limit shares and its own:
-    (the plan, "plant 1 bone_flap ocp-min-jerk"; which run, "lead", "compensated",
-    "slowed", "slowed, led" or "feed"; predicted; true)."""
-    pairs = []
+class TrueRun(NamedTuple):
+    """A true run of the study beside its prediction."""
+
+    plan: str
+    """The plan: "plant 1 bone_flap ocp-min-jerk"."""
+    kind: str
+    """Which run: "lead", "compensated", "slowed", "slowed, led" or "feed"."""
+    predicted_mm: float
+    """Its predicted cut's largest distance from the contour, mm."""
+    predicted_shares: dict[str, float]
+    """Its prediction's joint limit shares ("theta2 jerk": 0.9)."""
+    run: dict
+    """The true run (``true_run``'s record)."""
+
+    @property
+    def true_shares(self) -> dict[str, float]:
+        """The true run's joint limit shares."""
+        return self.run["limit_shares"]
+
+
+def true_runs(rows: list[dict]) -> list[TrueRun]:
+    """Every true run of the rows, each with its prediction."""
+    made = []
     for r in rows:
-        name = f"plant {r['plant']} {r['flap'].removeprefix('craniotomy_')} {r['planner']}"
-        runs = [
-            ("lead", r["predicted_lead_shares"], r["lead"]),
-            ("compensated", r["predicted_compensated_shares"], r["compensated"]),
+        plan = f"plant {r['plant']} {r['flap'].removeprefix('craniotomy_')} {r['planner']}"
+        made += [
+            TrueRun(plan, "lead", r["predicted_lead_mm"], r["predicted_lead_shares"], r["lead"]),
+            TrueRun(
+                plan,
+                "compensated",
+                r["predicted_compensated_mm"],
+                r["predicted_compensated_shares"],
+                r["compensated"],
+            ),
         ]
-        if r["slowed"]:
-            runs.append(("slowed", r["slowed"]["predicted_shares"], r["slowed"]["run"]))
-            if r["slowed"]["lead_run"]:
-                lead = r["slowed"]["lead_predicted_shares"], r["slowed"]["lead_run"]
-                runs.append(("slowed, led", *lead))
-        if r["highest_feed"]:
-            runs.append(("feed", r["highest_feed"]["predicted_shares"], r["highest_feed"]["run"]))
-        pairs += [(name, kind, shares, run["limit_shares"]) for kind, shares, run in runs]
-    return pairs
+        slowed, slower = r["slowed"], r["highest_feed"]
+        if slowed:
+            made.append(
+                TrueRun(
+                    plan,
+                    "slowed",
+                    slowed["predicted_mm"],
+                    slowed["predicted_shares"],
+                    slowed["run"],
+                )
+            )
+            if slowed["lead_run"]:
+                made.append(
+                    TrueRun(
+                        plan,
+                        "slowed, led",
+                        slowed["lead_predicted_mm"],
+                        slowed["lead_predicted_shares"],
+                        slowed["lead_run"],
+                    )
+                )
+        if slower:
+            made.append(
+                TrueRun(
+                    plan, "feed", slower["predicted_mm"], slower["predicted_shares"], slower["run"]
+                )
+            )
+    return made
 
 
 def margin_line(rows: list[dict]) -> str:
@@ -372,18 +416,18 @@ def margin_line(rows: list[dict]) -> str:
     the runs predicted at :data:`MARGIN_FLOOR` of the limit or more, against the margin
     :data:`LIMIT_SHARES` keeps; one line."""
     parts, failed = [], 0
-    pairs = predicted_and_true(rows)
+    runs = true_runs(rows)
     for figure, margin in LIMIT_SHARES.items():
         ratios = [
-            (true[name] / predicted[name], f"{plan}, {kind}")
-            for plan, kind, predicted, true in pairs
-            for name in predicted
-            if name.endswith(figure) and predicted[name] >= MARGIN_FLOOR
+            (run.true_shares[name] / share, f"{run.plan}, {run.kind}")
+            for run in runs
+            for name, share in run.predicted_shares.items()
+            if name.endswith(figure) and share >= MARGIN_FLOOR
         ]
         failed += sum(
-            predicted[name] <= margin < 1.0 < true[name]
-            for _, _, predicted, true in pairs
-            for name in predicted
+            share <= margin < 1.0 < run.true_shares[name]
+            for run in runs
+            for name, share in run.predicted_shares.items()
             if name.endswith(figure)
         )
         if not ratios:
@@ -396,7 +440,7 @@ def margin_line(rows: list[dict]) -> str:
             f"{np.median([v for v, _ in ratios]):.3f}, over {len(ratios)}"
         )
     return (
-        f"- The margin, over {len(pairs)} true runs: a joint figure's true share of its limit "
+        f"- The margin, over {len(runs)} true runs: a joint figure's true share of its limit "
         f"over its predicted share, where the prediction reached {MARGIN_FLOOR:.0%} of the "
         f"limit or more: " + "; ".join(parts) + f". Joint figures predicted within their "
         f"margin whose true run broke the limit: {failed}."
@@ -406,18 +450,7 @@ def margin_line(rows: list[dict]) -> str:
 def summary_lines(rows: list[dict]) -> list[str]:
     """What the rows of one speed say, a line each."""
     runs = [lab_run(r)[:3] for r in rows]
-    slowed = [s for _, s in _with_slowed(rows)]
-    errors = [abs(r["predicted_lead_mm"] - r["lead"]["true_mm"]) for r in rows]
-    errors += [abs(r["predicted_compensated_mm"] - r["compensated"]["true_mm"]) for r in rows]
-    errors += [abs(s["predicted_mm"] - s["run"]["true_mm"]) for s in slowed]
-    errors += [
-        abs(s["lead_predicted_mm"] - s["lead_run"]["true_mm"]) for s in slowed if s["lead_run"]
-    ]
-    errors += [
-        abs(r["highest_feed"]["predicted_mm"] - r["highest_feed"]["run"]["true_mm"])
-        for r in rows
-        if r["highest_feed"]
-    ]
+    errors = [abs(run.predicted_mm - run.run["true_mm"]) for run in true_runs(rows)]
     inside = [
         run is not None and run["completed"] and run["true_mm"] <= r["tube_mm"]
         for r, (_, run, _) in zip(rows, runs, strict=True)
@@ -692,7 +725,7 @@ def limits_figure(rows: list[dict]) -> Figure:
     """For the joints' speed, acceleration and jerk: each true run's share of the limit
     against its prediction's, with the limit and the margin the prediction keeps."""
     fig = Figure(figsize=(13, 4.5), layout="constrained")
-    pairs = predicted_and_true(rows)
+    runs = true_runs(rows)
     colours = {
         "lead": "tab:orange",
         "compensated": "tab:green",
@@ -703,16 +736,21 @@ def limits_figure(rows: list[dict]) -> Figure:
     for axis, (figure, margin) in zip(fig.subplots(1, 3), LIMIT_SHARES.items(), strict=True):
         for kind, colour in colours.items():
             points = [
-                (predicted[name], true[name])
-                for _, run, predicted, true in pairs
-                if run == kind
-                for name in predicted
+                (share, run.true_shares[name])
+                for run in runs
+                if run.kind == kind
+                for name, share in run.predicted_shares.items()
                 if name.endswith(figure)
             ]
             if points:
                 x, y = np.array(points).T
                 axis.scatter(100 * x, 100 * y, s=14, c=colour, label=kind)
-        shares = [max(p[n], t[n]) for _, _, p, t in pairs for n in p if n.endswith(figure)]
+        shares = [
+            max(share, run.true_shares[name])
+            for run in runs
+            for name, share in run.predicted_shares.items()
+            if name.endswith(figure)
+        ]
         top = 100 * max(1.1, *shares)
         axis.plot([0, top], [0, top], color="0.5", lw=1, label="true = predicted")
         axis.axhline(100, color="k", lw=1, label="the limit")
