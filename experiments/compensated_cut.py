@@ -16,7 +16,7 @@ and planner: the cut predicted on the identified file, the plan executed on the 
 true cut from the plant's true state), the stream compensated on the identified file
 (:func:`~spm_opt.verify.compensation.compensate`) and executed again. ``--part k/n``
 takes every n-th plant from the k-th (for two processes on two cores); ``--merge`` joins
-the parts' JSON into the tables. Writes ``compensated_cut.json`` (or a part's), and with
+the parts' JSON into the tables (and refuses a part an older version of the study wrote). Writes ``compensated_cut.json`` (or a part's), and with
 all parts ``compensated_cut.md``, ``compensated_cut.png`` (the cuts) and
 ``compensated_cut_limits.png`` (each true run's share of the joints' limits against its
 prediction's: the margin's measure) into ``--out``.
@@ -62,6 +62,9 @@ IDENTIFY_RUN = ExecutionSettings(
 )
 """The excitation's run, as experiments/identification_coverage.py runs it."""
 
+ROWS_LAYOUT = 2
+"""The layout of a part's rows (a part's ``rows_layout``); ``--merge`` refuses a part of
+another, written by an older version of this study."""
 MARGIN_FLOOR = 0.5
 """The margin is measured on the joints' figures predicted at this share of their limit or
 more, where a margin matters."""
@@ -136,8 +139,19 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     if args.merge:
         rows, study = [], vars(args)
-        for part in sorted(args.out.glob("compensated_cut.part*.json")):
-            written = json.loads(part.read_text())
+        found = sorted(args.out.glob("compensated_cut.part*.json"))
+        if not found:
+            parser.error(f"--merge: no compensated_cut.part*.json in {args.out}")
+        for part in found:
+            try:
+                written = json.loads(part.read_text())
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+                parser.error(f"--merge: {part} is not a part's JSON ({error})")
+            if not isinstance(written, dict) or written.get("rows_layout") != ROWS_LAYOUT:
+                parser.error(
+                    f"--merge: {part} is not a part of this version of the study (rows_layout "
+                    f"{ROWS_LAYOUT}); run its part again or remove it"
+                )
             rows += written["rows"]
             study = written.get("arguments", study)  # the parts' settings, not the merge's
         write_tables(argparse.Namespace(**(study | {"out": args.out})), rows)
@@ -266,7 +280,14 @@ def main() -> None:
                 )
     label = "-".join(f"{speed:g}" for speed in speeds)
     (args.out / f"compensated_cut.part{part}of{parts}.{label}mm_s.json").write_text(
-        json.dumps({"arguments": vars(args) | {"out": str(args.out)}, "rows": rows}, indent=1)
+        json.dumps(
+            {
+                "arguments": vars(args) | {"out": str(args.out)},
+                "rows_layout": ROWS_LAYOUT,
+                "rows": rows,
+            },
+            indent=1,
+        )
     )
     if parts == 1:
         write_tables(args, rows)

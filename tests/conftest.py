@@ -1,10 +1,13 @@
 """Shared fixtures: the paper's problem and its cubic baseline, the faster run of the
 hardware verification (Section 6) with its cubic plan, and the check of every figure a
-test saves."""
+test saves; experiments/ scripts as modules."""
 
+import importlib.util
 import signal
+import sys
 from collections.abc import Iterator
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import pytest
@@ -14,6 +17,18 @@ import spm_opt as so
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_PROBLEM = ROOT / "problems" / "craniotomy_bone_flap.toml"
 HARDWARE_PROBLEM = ROOT / "problems" / "craniotomy_hardware.toml"
+
+
+def experiment_module(name: str) -> ModuleType:
+    """experiments/<name>.py as a module."""
+    spec = importlib.util.spec_from_file_location(
+        f"experiment_{name}", ROOT / "experiments" / f"{name}.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import experiment_module
 
 import spm_opt as so
 from spm_opt.cli import main
@@ -105,6 +106,27 @@ def test_the_executed_cut_study_refuses_a_repeat_count_out_of_range(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    "part",
+    [{"rows": []}, "not json", ["a", "list"]],
+    ids=["an older study's part", "a damaged part", "not a part"],
+)
+def test_the_compensated_cut_merge_refuses_a_part_it_cannot_read(tmp_path, part):
+    text = part if isinstance(part, str) else json.dumps(part)
+    (tmp_path / "compensated_cut.part0of1.4mm_s.json").write_text(text)
+    script = ROOT / "experiments" / "compensated_cut.py"
+    result = subprocess.run(
+        [sys.executable, str(script), "--merge", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert result.returncode == 2
+    assert "compensated_cut.part0of1.4mm_s.json" in result.stderr.splitlines()[-1]
+    assert not (tmp_path / "compensated_cut.md").exists()
+
+
 def test_command_refuses_an_unknown_planner_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "comparison"
     problem = ROOT / "problems" / "craniotomy_bone_flap.toml"
@@ -162,7 +184,11 @@ def test_every_experiment_script_runs(tmp_path, command):
     out = ["--out", str(tmp_path)] if command[0] != "calibrate_prototype.py" else []
     if command[0] == "compensated_cut.py":
         part = json.loads((ROOT / "docs" / "compensated_cut" / "compensated_cut.json").read_text())
-        (tmp_path / "compensated_cut.part0of1.json").write_text(json.dumps({"rows": part[:6]}))
+        (tmp_path / "compensated_cut.part0of1.json").write_text(
+            json.dumps(
+                {"rows_layout": experiment_module("compensated_cut").ROWS_LAYOUT, "rows": part[:6]}
+            )
+        )
     script = [sys.executable, str(ROOT / "experiments" / command[0]), *command[1:], *out]
     result = subprocess.run(script, capture_output=True, text=True, timeout=600, check=False)
     assert result.returncode == 0, result.stderr

@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import importlib.util
 import re
-import sys
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import experiment_module
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from test_identify import synthetic_samples, with_efficiency
@@ -497,18 +496,6 @@ def test_the_identification_figure_is_over_time_with_a_title(tmp_path: Path) -> 
     (tmp_path / "identified.png").write_bytes(to_png(figure))
 
 
-def _experiment(name: str) -> ModuleType:
-    """experiments/<name>.py as a module."""
-    spec = importlib.util.spec_from_file_location(
-        f"experiment_{name}", ROOT / "experiments" / f"{name}.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_feed_hold_figure_keeps_the_rules(tmp_path: Path) -> None:
     rows = [
         {
@@ -521,13 +508,13 @@ def test_the_feed_hold_figure_keeps_the_rules(tmp_path: Path) -> None:
         }
         for at in (1.0, 3.0, 5.0)
     ]
-    figure = _experiment("feed_hold").figure(rows)
+    figure = experiment_module("feed_hold").figure(rows)
     assert "feed hold" in figure.get_suptitle()
     (tmp_path / "feed_hold.png").write_bytes(to_png(figure))
 
 
 def test_the_executed_cut_experiment_shows_the_cut_too(tmp_path: Path) -> None:
-    module = _experiment("executed_cut")
+    module = experiment_module("executed_cut")
     rows = [
         module.Row(
             problem=problem,
@@ -619,7 +606,7 @@ def test_the_compensated_cut_figures_keep_the_rules(tmp_path: Path) -> None:
         for flap in ("craniotomy_bone_flap", "craniotomy_five_landmarks")
         for planner in ("toppra", "ocp-min-time")
     ]
-    study = _experiment("compensated_cut")
+    study = experiment_module("compensated_cut")
     for name, figure in (("cut", study.figure(rows)), ("limits", study.limits_figure(rows))):
         figure.savefig(tmp_path / f"{name}.png")  # checked as it is saved
         assert (tmp_path / f"{name}.png").stat().st_size > 10_000

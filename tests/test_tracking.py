@@ -5,6 +5,9 @@ position loop into a first-order velocity loop, fed goals held for a period each
 ``solve_ivp`` between goals). Then the executor on the simulated robot, with the plant a
 heavier robot than the planning model (``prototype_plant.toml``), runs toppra's plan of
 ``craniotomy_hardware.toml``: a fast plan that the unled goals could not follow within 1°.
+Last, a simulated robot whose every 20th read returns 6 ms late: the goal written after it
+is the plan at the write, sampled there, and the run's true jerk stays near the punctual
+run's, where goals sampled at their cycles' time raise it.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from spm_opt.base.errors import PreflightError
 from spm_opt.execution.tracking import Lead, following_error_limit
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import DEG
+from spm_opt.verify.executed_cut import evaluate_log
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
@@ -144,3 +148,73 @@ def test_led_goals_that_would_leave_the_joint_range_are_refused(hardware_problem
     unled = so.ExecutionSettings(tracking="none")
     robot = so.SimulatedRobot(hardware_problem.robot)
     so.execution.Executor(hardware_problem, robot, unled).check_plan(plan)
+
+
+class _LateReads(so.SimulatedRobot):
+    """The simulated robot whose every ``every``-th read returns ``late_s`` (s) late, as a
+    bus read on a busy machine does."""
+
+    def __init__(self, *args, every: int, late_s: float, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.every, self.late_s, self.reads = every, late_s, 0
+
+    def read(self):
+        measurement = super().read()
+        self.reads += 1
+        if self.reads % self.every == 0:
+            self.clock.sleep_until(self.clock.now() + self.late_s)
+        return measurement
+
+
+def _late_run(problem, plan, tmp_path, name, late_s):
+    backend = _LateReads(
+        problem.robot,
+        start_rad=plan.position(0.0),
+        plant_robot=so.load_robot(PLANT),
+        every=20,
+        late_s=late_s,
+    )
+    log, trace = tmp_path / f"{name}.csv", tmp_path / f"{name}.npz"
+    result = so.execute(plan, backend, problem, log, so.ExecutionSettings(tracking="lead"))
+    assert result.succeeded, result.reason
+    backend.trace.save(trace)
+    true = evaluate_log(problem, log, trace).true
+    return so.read_log(log)[0], max(v for k, v in true.limit_shares.items() if "jerk" in k)
+
+
+def test_a_goal_written_late_carries_its_reference_to_the_write(
+    hardware_problem, toppra_plan, tmp_path, monkeypatch
+):
+    late = 0.006
+    _, punctual = _late_run(hardware_problem, toppra_plan, tmp_path, "punctual", 0.0)
+    table, carried = _late_run(hardware_problem, toppra_plan, tmp_path, "carried", late)
+    # each goal is the plan's state at its write, led: at its cycle's time, or 6 ms after
+    # it where the read was late; the plan is sampled here at the later time itself, not
+    # carried on by its derivatives
+    rows = table[table["phase"] == "plan"]
+    plan_time = rows["plan_time_s"].to_numpy() + toppra_plan.start_time
+    lead = Lead.for_actuator(hardware_problem.robot.actuator, PERIOD_S, "lead")
+    goal = rows[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
+
+    def led_plan(t: np.ndarray) -> np.ndarray:
+        return lead.goal(
+            toppra_plan.position(t), toppra_plan.velocity(t), toppra_plan.acceleration(t)
+        )
+
+    off = {
+        "at the cycle": np.max(np.abs(goal - led_plan(plan_time)), axis=1),
+        "at the write": np.max(np.abs(goal - led_plan(plan_time + late)), axis=1),
+    }
+    # carried on by q, q̇ and q̈ alone, the led goal misses the plan's jerk q⃛ over d:
+    # by q⃛ (d³/6 + rate_s d²/2 + acceleration_s2 d) at most
+    jerk = hardware_problem.limits.max_joint_jerk
+    bound = jerk * (late**3 / 6 + lead.rate_s * late**2 / 2 + lead.acceleration_s2 * late)
+    moving = np.max(np.abs(toppra_plan.velocity(plan_time)), axis=1) > 0.5  # v d ≫ bound
+    carried_on = off["at the cycle"] > 1e-8  # the log keeps 9 digits
+    assert np.all(off["at the write"][carried_on] <= np.max(bound))
+    assert 0.03 < np.mean(carried_on[moving]) < 0.07, np.mean(carried_on)  # every 20th read
+    # the run's true jerk, measured: 91.9 % of its limit punctual, 93.3 % with every 20th
+    # read 6 ms late and the goals carried, 137.1 % with them sampled at their cycles' time
+    monkeypatch.setattr(Lead, "written_goal", lambda lead, q, dq, ddq, _late: lead.goal(q, dq, ddq))
+    _, uncarried = _late_run(hardware_problem, toppra_plan, tmp_path, "uncarried", late)
+    assert carried - punctual < 0.5 * (uncarried - punctual), (punctual, carried, uncarried)

@@ -306,12 +306,14 @@ class ControlLoop:
     def send(
         self, cycle: Cycle, position: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray
     ) -> bool:
-        """Write the goal of a reference state (led by the loop's lag); only a write that
-        succeeded becomes the commanded state. A write reported failed counts as not
-        delivered, though a port can fail a packet that left (see
+        """Write the goal of a reference state at the cycle's time (carried on to the write
+        and led by the loop's lag: :meth:`~spm_opt.execution.tracking.Lead.written_goal`);
+        only a write that succeeded becomes the commanded state. A write reported failed
+        counts as not delivered, though a port can fail a packet that left (see
         :mod:`spm_opt.execution.dynamixel`); the stop's first goal, one period along from
         the last goal known, is then the one that arrived to within q̈ T²."""
-        goal = self._lead.goal(position, velocity, acceleration)
+        late = self._backend.clock.now() - self.ticker.origin - cycle.time_s
+        goal = self._lead.written_goal(position, velocity, acceleration, late)
         try:
             self._backend.write_goal(goal)
         except Exception as error:  # noqa: BLE001 - any failure of the device is a fault
