@@ -16,10 +16,11 @@ and planner: the cut predicted on the identified file, the plan executed on the 
 true cut from the plant's true state), the stream compensated on the identified file
 (:func:`~spm_opt.verify.compensation.compensate`) and executed again. ``--part k/n``
 takes every n-th plant from the k-th (for two processes on two cores); ``--merge`` joins
-the parts' JSON into the tables (and refuses a part an older version of the study wrote). Writes ``compensated_cut.json`` (or a part's), and with
-all parts ``compensated_cut.md``, ``compensated_cut.png`` (the cuts) and
-``compensated_cut_limits.png`` (each true run's share of the joints' limits against its
-prediction's: the margin's measure) into ``--out``.
+the parts' JSON into the tables (and refuses a part an older version of the study wrote).
+Writes ``compensated_cut.json`` (or a part's), and with all parts ``compensated_cut.md``,
+``compensated_cut.png`` (the cuts) and ``compensated_cut_limits.png`` (each true run's
+share of the joints' limits against its prediction's: the margin's measure) into
+``--out``.
 """
 
 from __future__ import annotations
