@@ -77,6 +77,7 @@ from spm_opt.execution.emulator import (
     spawn_emulator,
 )
 from spm_opt.execution.plant import StateTrace
+from spm_opt.execution.realtime import CONTROL_FIFO_PRIORITY
 from spm_opt.execution.tracking import Lead
 from spm_opt.judge.limits import RULES
 
@@ -267,6 +268,9 @@ def test_the_move_completes_through_the_sdk_and_the_emulator(hardware_problem, m
     result, table, header, trace = run_on_the_wire(hardware_problem, move, Faults(), tmp_path)
     assert result.completed and result.at_rest and header["stop"] is None
     assert header["backend"]["backend"] == "dynamixel"
+    # a loop on the wall clock runs under the real-time policy where it may (root in CI)
+    if os.geteuid() == 0:
+        assert header["control_thread_fifo"] == CONTROL_FIFO_PRIORITY
     # the log starts at 0 (its first cycle late by no more than the loop's worst period
     # error: a late cycle shortens the next period); its origin on the monotonic clock is in
     # the header

@@ -114,6 +114,7 @@ def test_led_goals_make_a_fast_plan_run_on_a_heavier_robot(hardware_problem, top
     led, table, header, led_error = _run(hardware_problem, toppra_plan, tmp_path, "lead")
     assert led.succeeded, led.reason
     assert header["tracking"]["mode"] == "lead"
+    assert header["control_thread_fifo"] is None  # a loop on a virtual clock: never real time
     unled, _, _, unled_error = _run(hardware_problem, toppra_plan, tmp_path, "none")
     # measured: 0.15 deg with the lead (0.05 deg of it the plant's encoder offsets), 2.6
     # deg without, against the plan at the logged plan time

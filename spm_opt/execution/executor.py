@@ -54,14 +54,14 @@ import numpy as np
 from spm_opt.base.errors import InputError, RunInterrupted
 from spm_opt.base.version import package_version
 from spm_opt.execution import preflight
-from spm_opt.execution.backend import CLOCK_EPSILON_S, Backend, Measurement
+from spm_opt.execution.backend import CLOCK_EPSILON_S, Backend, Measurement, VirtualClock
 from spm_opt.execution.ceiling import feed_ceiling
 from spm_opt.execution.cycle import ControlLoop, Cycle, Fault
 from spm_opt.execution.encoders import calibrated
 from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace
 from spm_opt.execution.log import LogWriter, Write
 from spm_opt.execution.moves import Segment, approach_move
-from spm_opt.execution.realtime import frozen_heap, raised_priority
+from spm_opt.execution.realtime import CONTROL_FIFO_PRIORITY, frozen_heap, raised_priority
 from spm_opt.execution.rest import FeedHoldWatch, RestWindow, hold_until_rest
 from spm_opt.execution.results import ExecutionResult, LoopStatistics, RunStatus
 from spm_opt.execution.settings import ExecutionSettings
@@ -221,8 +221,14 @@ class Executor:
             start = trajectory.position(trajectory.start_time)
             limits = self.settings.joint_limits(self.problem)
             approach = approach_move(self.settings, limits, measured.position_rad, start)
-            with frozen_heap(), raised_priority() as nice:
-                header = {**header, "control_thread_nice": nice}
+            on_the_wall_clock = not isinstance(backend.clock, VirtualClock)
+            fifo = CONTROL_FIFO_PRIORITY if on_the_wall_clock else None
+            with frozen_heap(), raised_priority(fifo=fifo) as priority:
+                header = {
+                    **header,
+                    "control_thread_nice": priority.nice,
+                    "control_thread_fifo": priority.fifo,
+                }
                 return self._run_connected(trajectory, approach, measured, log_path, header)
         finally:
             backend.close()

@@ -19,7 +19,7 @@ import numpy as np
 from spm_opt.execution.emulator.faults import Faults
 from spm_opt.execution.emulator.server import Emulator
 from spm_opt.execution.plant import PlantSettings, StateTrace
-from spm_opt.execution.realtime import frozen_heap, raised_priority
+from spm_opt.execution.realtime import CONTROL_FIFO_PRIORITY, frozen_heap, raised_priority
 from spm_opt.model.params import Robot
 
 DEFAULT_ROBOT = Path(__file__).resolve().parents[3] / "problems" / "robots" / "prototype.toml"
@@ -61,7 +61,7 @@ def serve(
         try:
             # before the device is announced: collecting takes time; the plant stands for
             # hardware that never waits for a core, so it asks for the loop's priority too
-            with frozen_heap(), raised_priority():
+            with frozen_heap(), raised_priority(fifo=CONTROL_FIFO_PRIORITY):
                 announce(emulator.device)
                 emulator.serve_forever(stop)
         finally:
