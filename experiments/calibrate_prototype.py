@@ -12,12 +12,14 @@ problems/robots/prototype.toml. Prints the calibrated values to write into that 
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
 
 import spm_opt as so
+from spm_opt.cli.run import run_script
 from spm_opt.model.dynamics import inverse_dynamics
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,4 +69,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

@@ -19,6 +19,7 @@ import pandas as pd
 import spm_opt as so
 from spm_opt.base.files import write_atomically
 from spm_opt.base.markdown import markdown_table
+from spm_opt.cli.run import run_script
 from spm_opt.report.columns import column
 from spm_opt.studies.comparison import (
     comparison_table,
@@ -83,4 +84,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

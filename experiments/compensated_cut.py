@@ -38,6 +38,7 @@ from matplotlib.figure import Figure
 
 import spm_opt as so
 from spm_opt.base.markdown import markdown_table
+from spm_opt.cli.run import run_script
 from spm_opt.execution import ExecutionSettings
 from spm_opt.identify.robot_file import robot_file_text
 from spm_opt.judge.limits import ROBOT_RULES, contour_tube
@@ -105,6 +106,7 @@ def true_run(
     )
     log = work / f"{name}.csv"
     result = so.execute(plan, backend, problem, log, settings or ExecutionSettings())
+    result.raise_if_signalled()
     backend.trace.save(work / f"{name}.npz")
     true = evaluate_log(problem, log, work / f"{name}.npz").true
     return {
@@ -137,7 +139,6 @@ def main() -> None:
     parser.add_argument("--part", default="0/1")
     parser.add_argument("--merge", action="store_true")
     args = parser.parse_args()
-    args.out.mkdir(parents=True, exist_ok=True)
     if args.merge:
         rows, study = [], vars(args)
         found = sorted(args.out.glob("compensated_cut.part*.json"))
@@ -157,8 +158,17 @@ def main() -> None:
             study = written.get("arguments", study)  # the parts' settings, not the merge's
         write_tables(argparse.Namespace(**(study | {"out": args.out})), rows)
         return
-    part, parts = (int(v) for v in args.part.split("/"))
-    speeds = [float(v) for v in args.speed_mm_s.split(",")]
+    try:
+        part, parts = (int(v) for v in args.part.split("/"))
+    except ValueError:
+        part, parts = 0, 0
+    if not 0 <= part < parts:
+        parser.error(f"--part {args.part}: expected k/n, whole numbers with 0 <= k < n")
+    try:
+        speeds = [float(v) for v in args.speed_mm_s.split(",")]
+    except ValueError:
+        parser.error(f"--speed-mm-s {args.speed_mm_s}: expected comma-separated speeds, mm/s")
+    args.out.mkdir(parents=True, exist_ok=True)
     flaps = {
         (name, speed): so.load_problem(
             ROOT / "problems" / f"{name}.toml",
@@ -797,4 +807,4 @@ def limits_figure(rows: list[dict]) -> Figure:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

@@ -54,8 +54,11 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 import spm_opt as so
+from spm_opt.base.errors import CommunicationError
 from spm_opt.base.markdown import markdown_table
+from spm_opt.cli.run import run_script
 from spm_opt.execution.backend import Backend
+from spm_opt.execution.results import ExecutionResult
 from spm_opt.judge.limits import ROBOT_RULES, contour_tube
 from spm_opt.judge.report import Violation
 from spm_opt.model.params import DEG, MM, Robot
@@ -70,6 +73,8 @@ PLANT = ROOT / "problems" / "robots" / "prototype_plant.toml"
 TRACKINGS = ("none", "lead")
 SLOWED = "slowed"
 """The tracking name of the lead on the plan slowed at its breakaways."""
+CONNECT_TRIES = 3
+"""How many times a run's connection is made before its failure ends the study."""
 FLOOR_MM = 1e-3
 """The figure's floor for a cut's distance from the contour, mm (log scale)."""
 _COLOURS = {"none": "tab:blue", "lead": "tab:orange", "plan": "0.6"}
@@ -132,6 +137,32 @@ def _backend(kind: str, problem: so.Problem, plan: so.Trajectory, plant: Robot, 
         yield DynamixelRobot(problem.robot.actuator, emulator.device)
 
 
+def _executed(
+    kind: str,
+    problem: so.Problem,
+    plan: so.Trajectory,
+    plant: Robot,
+    tracking: str,
+    log: Path,
+    trace: Path,
+) -> ExecutionResult:
+    """The run of ``plan`` on a fresh backend of ``kind`` driving ``plant``, logged to
+    ``log`` and ``trace``. A connection that fails before anything moves (a read timing out
+    while other work loads the machine) is made again on a fresh backend, up to
+    :data:`CONNECT_TRIES` times in all, rather than ending the study."""
+    tries = 1
+    while True:
+        backend: Backend
+        try:
+            with _backend(kind, problem, plan, plant, trace) as backend:
+                return so.execute(plan, backend, problem, log, _settings(tracking))
+        except CommunicationError as error:
+            if tries == CONNECT_TRIES:
+                raise
+            tries += 1
+            print(f"{log.stem}: connecting failed ({error}); connecting again", file=sys.stderr)
+
+
 def run_one(
     kind: str,
     problem: so.Problem,
@@ -150,9 +181,8 @@ def run_one(
         f"-{repeat}"
     )
     log, trace = work / f"{name}.csv", work / f"{name}.npz"
-    backend: Backend
-    with _backend(kind, problem, plan, plant[1], trace) as backend:
-        result = so.execute(plan, backend, problem, log, _settings(tracking))
+    result = _executed(kind, problem, plan, plant[1], tracking, log, trace)
+    result.raise_if_signalled()
     reports = evaluate_log(problem, log, trace)
     true = reports.true
     assert true is not None
@@ -549,4 +579,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

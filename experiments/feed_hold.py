@@ -45,6 +45,7 @@ from scipy.spatial import cKDTree
 import spm_opt as so
 from spm_opt.base.files import write_atomically
 from spm_opt.base.markdown import markdown_table
+from spm_opt.cli.run import run_script
 from spm_opt.execution import ExecutionSettings, Executor, SimulatedRobot, read_log
 from spm_opt.model import kinematics
 from spm_opt.model.params import MM, load_robot
@@ -280,4 +281,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

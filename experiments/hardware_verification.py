@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import spm_opt as so
+from spm_opt.cli.run import run_script
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
 from spm_opt.model.params import load_robot
 from spm_opt.studies.hardware import write_verification
@@ -92,4 +93,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

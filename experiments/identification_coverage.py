@@ -29,6 +29,7 @@ import numpy as np
 
 import spm_opt as so
 from spm_opt.base.markdown import markdown_table
+from spm_opt.cli.run import run_script
 from spm_opt.execution import ExecutionSettings
 from spm_opt.execution.plant import PlantSettings
 from spm_opt.studies.identified_plants import (
@@ -190,4 +191,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

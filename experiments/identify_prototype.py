@@ -40,6 +40,7 @@ import pandas as pd
 import spm_opt as so
 from spm_opt.base.markdown import markdown_table
 from spm_opt.cli import main as spm_opt_main
+from spm_opt.cli.run import run_script
 from spm_opt.execution import ExecutionSettings, SimulatedRobot, execute
 from spm_opt.execution.log import header_path
 from spm_opt.identify.estimate import IDENTIFIED_RELATIVE_ERROR, identify
@@ -109,6 +110,7 @@ def run(
                 settings,
             )
         trace = None
+    result.raise_if_signalled()
     if not result.completed:
         raise SystemExit(f"{log.name}: the run stopped: {result.reason}")
     return trace
@@ -372,4 +374,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(main))

@@ -44,6 +44,7 @@ from spm_opt.base.markdown import markdown_table
 from spm_opt.calibration import design
 from spm_opt.calibration.fit import PoseMeasurements, fit
 from spm_opt.cli import main as cli_main
+from spm_opt.cli.run import run_script
 from spm_opt.model import geometry
 from spm_opt.model.geometry import PARAMETERS, Geometry
 from spm_opt.verify.executed_cut import evaluate_log
@@ -118,7 +119,7 @@ def flap_on_the_plant(out: Path) -> dict[str, object]:
                 start = plan.position(0.0) - plant.encoder_offset
                 backend = so.SimulatedRobot(model.robot, start_rad=start, plant_robot=plant)
                 log = Path(folder) / f"{label}_{planner}.csv"
-                so.execute(plan, backend, model, log)
+                so.execute(plan, backend, model, log).raise_if_signalled()
                 backend.trace.save(log.with_suffix(".npz"))
                 true = evaluate_log(model, log, log.with_suffix(".npz")).true
                 cuts.setdefault(planner, {})[label] = true.max_contour_deviation_mm
@@ -290,4 +291,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

@@ -7,8 +7,10 @@ writes): Tables III and IV, Figs. 8, 13 and 14 and the baseline's evaluation.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
+from spm_opt.cli.run import run_script
 from spm_opt.studies.reproduce import reproduce
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,4 +25,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(main))

@@ -9,6 +9,7 @@
     ├── CommunicationError           a transaction with a device failed (timeout, corrupt reply)
     ├── DeviceError                  a device reports a fault (a hardware error at connection)
     ├── RunInterrupted               a run stopped before the robot moved (nothing written)
+    ├── StopAsked                    SIGINT or SIGTERM stopped one run of several: make no more
     └── MissingDependency (ImportError)  an optional package is not installed
 
 Messages are one line naming the field, the value and what is allowed; the command line
@@ -71,6 +72,23 @@ class DeviceError(SpmOptError):
 class RunInterrupted(SpmOptError):
     """A stop was asked for (SIGINT, SIGTERM, ``Executor.stop``) during pre-flight: the
     run ended before connecting, so nothing moved and nothing was written."""
+
+
+class StopAsked(SpmOptError):
+    """SIGINT or SIGTERM stopped a run that a script or study makes among others: the run
+    ended in its safe stop, and the script is to make no more runs
+    (:meth:`~spm_opt.execution.results.ExecutionResult.raise_if_signalled`).
+
+    Parameters
+    ----------
+    message : str
+    signal_number : int
+        The first signal the run received (``signal.SIGINT`` or ``signal.SIGTERM``).
+    """
+
+    def __init__(self, message: str, signal_number: int) -> None:
+        super().__init__(message)
+        self.signal_number = signal_number
 
 
 class MissingDependency(SpmOptError, ImportError):

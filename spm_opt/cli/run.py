@@ -11,9 +11,10 @@ import logging
 import signal
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
-from spm_opt.base.errors import PlanningError, RunInterrupted, SpmOptError, require
+from spm_opt.base.errors import PlanningError, RunInterrupted, SpmOptError, StopAsked, require
 from spm_opt.cli.commands import COMMANDS, GateFailed, optional_modules
 from spm_opt.cli.parser import build_parser
 
@@ -67,23 +68,47 @@ def _run(args: argparse.Namespace) -> int:
         for module, needed_by in optional_modules(args):
             require(module, needed_by)
         COMMANDS[args.command](args)
-    except RunInterrupted as interrupted:
-        print(f"spm-opt: interrupted: {interrupted}", file=sys.stderr)
-        return 130
-    except PlanningError as error:  # a valid problem the planner could not plan
-        print(f"spm-opt: failed: {error}", file=sys.stderr)
-        return 1
-    except SpmOptError as error:
-        print(f"spm-opt: error: {error}", file=sys.stderr)
-        return 2
     except GateFailed as failed:
         print(f"spm-opt: {failed}", file=sys.stderr)
         return 1
-    except OSError as error:  # an output path that cannot be written: the user can fix it
-        where = f"{error.filename}: " if error.filename else ""
-        print(f"spm-opt: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)
-        return 2
+    except (SpmOptError, OSError) as error:
+        return _ended_by("spm-opt", error)
     return 0
+
+
+def run_script(main: Callable[[], int | None]) -> int:
+    """Run an experiment script's ``main``; returns its exit status. An error ends it as
+    it ends ``spm-opt`` (:data:`~spm_opt.cli.parser.EXIT_STATUSES`: one line on stderr,
+    naming the script; a bad input 2, a plan that could not be made 1, a Ctrl-C 130), and
+    a SIGINT or SIGTERM that stopped one of its runs with 128 plus the signal's number."""
+    name = Path(sys.argv[0]).name
+    try:
+        return main() or 0
+    except (SpmOptError, OSError) as error:
+        return _ended_by(name, error)
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _ended_by(name: str, error: SpmOptError | OSError) -> int:
+    """Say in one line on stderr, after ``name``, how ``error`` ended the program; returns
+    the exit status."""
+    if isinstance(error, StopAsked):
+        print(f"{name}: stopped: {error}", file=sys.stderr)
+        return 128 + error.signal_number
+    if isinstance(error, RunInterrupted):
+        print(f"{name}: interrupted: {error}", file=sys.stderr)
+        return 130
+    if isinstance(error, PlanningError):  # a valid problem the planner could not plan
+        print(f"{name}: failed: {error}", file=sys.stderr)
+        return 1
+    if isinstance(error, OSError):  # an output path that cannot be written: the user can fix it
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"{name}: error: {where}cannot write ({error.strerror or error})", file=sys.stderr)
+    else:
+        print(f"{name}: error: {error}", file=sys.stderr)
+    return 2
 
 
 def _wait_for_builds() -> None:

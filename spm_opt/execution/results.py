@@ -3,11 +3,14 @@ view, and how it ended (SI; times on the log's clock)."""
 
 from __future__ import annotations
 
+import signal
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from spm_opt.base.errors import StopAsked
 
 
 @dataclass(frozen=True)
@@ -185,3 +188,16 @@ class ExecutionResult:
     def succeeded(self) -> bool:
         """The plan ran to its end and rest was proven after it."""
         return self.completed and self.at_rest
+
+    def raise_if_signalled(self) -> None:
+        """Raise :class:`~spm_opt.base.errors.StopAsked` if a SIGINT or SIGTERM reached
+        this run. The executor answers a signal with the safe stop and returns; a script
+        making runs one after another calls this after each, so that the signal ends the
+        script rather than the run alone and the next run never starts."""
+        if self.signals:
+            first = self.signals[0]
+            number = signal.Signals[first.split()[0]]
+            raise StopAsked(
+                f"{first}: the run ended in its safe stop ({self.reason}); no further run was made",
+                number,
+            )

@@ -119,6 +119,7 @@ def identify_plant(
         )
         log = Path(folder) / f"{name}.csv"
         result = execute(plan, backend, problem, log, settings)
+        result.raise_if_signalled()
         if not result.completed:
             raise RuntimeError(f"{name} on the plant stopped: {result.reason}")
         logs.append(log)
