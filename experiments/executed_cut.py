@@ -106,6 +106,9 @@ class Row:
     predicted_share_of_limit: dict[str, float]
     slowed_throughout: bool = False
     repeat: int = 0
+    late_goals: int = 0
+    latest_goal_ms: float = 0.0
+    broken_near_late_goals: list[str] = dataclasses.field(default_factory=list)
 
 
 def _plants(calibrated: bool) -> Iterator[tuple[str, Robot]]:
@@ -209,6 +212,9 @@ def run_one(
         worst_share_of_limit=worst_by_figure(true.limit_shares),
         predicted_share_of_limit=worst_by_figure(predicted.report.limit_shares),
         repeat=repeat,
+        late_goals=true.late_goals,
+        latest_goal_ms=true.latest_goal_ms,
+        broken_near_late_goals=list(true.after_late_goals),
     )
 
 
@@ -389,6 +395,9 @@ def repeats_table(rows: list[Row]) -> str:
                 f"(×{min(true) / share:.3f}–{max(true) / share:.3f})"
             )
         cuts = [r.true_deviation_mm for r in repeated]
+        late = [r for r in repeated if r.late_goals]
+        beyond = [r for r in repeated if _beyond_prediction(r)]
+        near = [r for r in beyond if set(_beyond_prediction(r)) <= set(r.broken_near_late_goals)]
         lines.append(
             (
                 *key,
@@ -396,6 +405,8 @@ def repeats_table(rows: list[Row]) -> str:
                 f"{sum(r.completed for r in repeated)}",
                 "; ".join(cells),
                 f"{repeated[0].predicted_deviation_mm:.4f}: {min(cuts):.4f}–{max(cuts):.4f}",
+                f"{len(late)}" + (f" ({max(r.latest_goal_ms for r in late):.1f})" if late else ""),
+                f"{len(beyond)} ({len(near)})",
             )
         )
     header = (
@@ -407,8 +418,15 @@ def repeats_table(rows: list[Row]) -> str:
         "completed",
         "worst joint figure of its limit, predicted: true, least–most (true over predicted)",
         "cut off the contour, predicted: true, least–most (mm)",
+        "runs with a goal late (the latest, ms)",
+        "runs breaking a robot limit their prediction kept (each such limit near a late goal)",
     )
     return _table_or_nothing(header, lines)
+
+
+def _beyond_prediction(row: Row) -> list[str]:
+    """The robot limits ``row``'s true run broke that its prediction kept."""
+    return [limit for limit in row.true_broken_limits if limit not in row.predicted_broken_limits]
 
 
 def _table_or_nothing(header: tuple[str, ...], lines: list[tuple[str, ...]]) -> str:

@@ -326,6 +326,20 @@ def test_a_log_is_judged_under_the_problem_it_ran_under(meridian, paper_problem,
     assert evaluate_log(paper_problem, log, other_problem=True).measured.rows_judged == len(t)
 
 
+def test_a_logs_late_goals_are_counted_and_a_damaged_record_of_them_is_named(meridian, tmp_path):
+    t, q, qd = meridian_sweep()
+    late = {"threshold_s": 0.002, "count": 3, "latest_s": 0.006, "first": [[1.0, 0.006]]}
+    timing = {"read_s": 0.0, "goal_written_s": 0.0, "late_goals": late}
+    outcome = {"completed": True, "reason": "completed", "cycle_timing": timing}
+    log = write_log(tmp_path / "run.csv", meridian, t, q, q, velocity=qd, outcome=outcome)
+    report = evaluate_log(meridian, log).measured
+    assert (report.late_goals, report.latest_goal_ms) == (3, pytest.approx(6.0))
+    late["first"] = [[1.0, 0.006, "lots"]]
+    damaged = write_log(tmp_path / "damaged.csv", meridian, t, q, q, velocity=qd, outcome=outcome)
+    with pytest.raises(InputError, match=r"^log header: cycle_timing.late_goals: expected"):
+        evaluate_log(meridian, damaged)
+
+
 def test_evaluate_takes_a_log_or_a_trajectory_by_its_path(meridian, hardware_problem, tmp_path):
     t, q, qd = meridian_sweep()
     log = write_log(tmp_path / "run.csv", meridian, t, q, q, velocity=qd)

@@ -22,6 +22,7 @@ from scipy.integrate import solve_ivp
 
 import spm_opt as so
 from spm_opt.base.errors import PreflightError
+from spm_opt.execution.cycle import CycleTiming
 from spm_opt.execution.tracking import Lead, following_error_limit
 from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import DEG
@@ -168,7 +169,7 @@ class _LateReads(so.SimulatedRobot):
         return measurement
 
 
-def _late_run(problem, plan, tmp_path, name, late_s):
+def _late_run(problem, plan, tmp_path, name, late_s, tracking="lead"):
     backend = _LateReads(
         problem.robot,
         start_rad=plan.position(0.0),
@@ -177,25 +178,35 @@ def _late_run(problem, plan, tmp_path, name, late_s):
         late_s=late_s,
     )
     log, trace = tmp_path / f"{name}.csv", tmp_path / f"{name}.npz"
-    result = so.execute(plan, backend, problem, log, so.ExecutionSettings(tracking="lead"))
+    result = so.execute(plan, backend, problem, log, so.ExecutionSettings(tracking=tracking))
     assert result.succeeded, result.reason
     backend.trace.save(trace)
     true = evaluate_log(problem, log, trace).true
-    return so.read_log(log)[0], worst_by_figure(true.limit_shares)["jerk"]
+    return so.read_log(log)[0], true
 
 
+def _jerk_share(true) -> float:
+    return worst_by_figure(true.limit_shares)["jerk"]
+
+
+@pytest.mark.parametrize("tracking", ["lead", "none"])
 def test_a_goal_written_late_carries_its_reference_to_the_write(
-    hardware_problem, toppra_plan, tmp_path, monkeypatch
+    hardware_problem, toppra_plan, tmp_path, monkeypatch, tracking
 ):
     late = 0.006
-    _, punctual = _late_run(hardware_problem, toppra_plan, tmp_path, "punctual", 0.0)
-    table, carried = _late_run(hardware_problem, toppra_plan, tmp_path, "carried", late)
-    # each goal is the plan's state at its write, led: at its cycle's time, or 6 ms after
-    # it where the read was late; the plan is sampled here at the later time itself, not
-    # carried on by its derivatives
+    _, punctual = _late_run(hardware_problem, toppra_plan, tmp_path, "punctual", 0.0, tracking)
+    table, carried = _late_run(hardware_problem, toppra_plan, tmp_path, "carried", late, tracking)
+    # the goal before each late read was held 6 ms longer: the judge counts each such goal
+    assert punctual.late_goals == 0 and not punctual.after_late_goals
+    cycles = len(table)
+    assert abs(carried.late_goals - cycles / 20) <= 2, (carried.late_goals, cycles)
+    assert carried.latest_goal_ms == pytest.approx(1000 * late, abs=0.1)
+    # each goal is the plan's state at its write (led, or not): at its cycle's time, or
+    # 6 ms after it where the read was late; the plan is sampled here at the later time
+    # itself, not carried on by its derivatives
     rows = table[table["phase"] == "plan"]
     plan_time = rows["plan_time_s"].to_numpy() + toppra_plan.start_time
-    lead = Lead.for_actuator(hardware_problem.robot.actuator, PERIOD_S, "lead")
+    lead = Lead.for_actuator(hardware_problem.robot.actuator, PERIOD_S, tracking)
     goal = rows[["goal_theta1_rad", "goal_theta2_rad"]].to_numpy()
 
     def led_plan(t: np.ndarray) -> np.ndarray:
@@ -215,8 +226,26 @@ def test_a_goal_written_late_carries_its_reference_to_the_write(
     carried_on = off["at the cycle"] > 1e-8  # the log keeps 9 digits
     assert np.all(off["at the write"][carried_on] <= np.max(bound))
     assert 0.03 < np.mean(carried_on[moving]) < 0.07, np.mean(carried_on)  # every 20th read
-    # the run's true jerk, measured: 91.9 % of its limit punctual, 93.3 % with every 20th
-    # read 6 ms late and the goals carried, 137.1 % with them sampled at their cycles' time
+    # the run's true jerk, measured: led, 91.9 % of its limit punctual, 93.3 % with every
+    # 20th read 6 ms late and the goals carried, 137.1 % with them sampled at their cycles'
+    # time; unled, 81.5 %, 87.2 % and 119.9 %
     monkeypatch.setattr(Lead, "written_goal", lambda lead, q, dq, ddq, _late: lead.goal(q, dq, ddq))
-    _, uncarried = _late_run(hardware_problem, toppra_plan, tmp_path, "uncarried", late)
-    assert carried - punctual < 0.5 * (uncarried - punctual), (punctual, carried, uncarried)
+    _, uncarried = _late_run(hardware_problem, toppra_plan, tmp_path, "uncarried", late, tracking)
+    shares = [_jerk_share(true) for true in (punctual, carried, uncarried)]
+    assert shares[1] - shares[0] < 0.5 * (shares[2] - shares[0]), shares
+    # each jerk limit the uncarried run broke, the judge names with a late goal near it
+    jerks = {v.limit for v in uncarried.violations if v.rule == "joint jerk"}
+    assert jerks and jerks <= set(uncarried.after_late_goals), uncarried.after_late_goals
+
+
+def test_a_goal_is_late_when_its_delay_grows_or_the_goal_before_is_held_longer():
+    period = 0.01
+    timing = CycleTiming(period)
+    for k in range(10):  # a steady 3 ms between each reference's instant and its arrival
+        timing.wrote(k * period, 0.004, 0.001)
+    assert timing.late_count == 0
+    timing.wrote(10 * period, 0.0065, 0.001)  # its delay 2.5 ms longer
+    timing.wrote(11 * period, 0.004, 0.001)  # back to the steady delay: on time
+    timing.wrote(13 * period, 0.004, 0.001)  # a cycle skipped: the goal before held 20 ms
+    assert np.allclose(timing.late, [(0.10, 0.0025), (0.13, 0.01)])
+    assert timing.record()["late_goals"]["count"] == 2

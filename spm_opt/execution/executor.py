@@ -56,7 +56,7 @@ from spm_opt.base.version import package_version
 from spm_opt.execution import preflight
 from spm_opt.execution.backend import CLOCK_EPSILON_S, Backend, Measurement, VirtualClock
 from spm_opt.execution.ceiling import feed_ceiling
-from spm_opt.execution.cycle import ControlLoop, Cycle, Fault
+from spm_opt.execution.cycle import LATE_GOAL_S, ControlLoop, Cycle, CycleTiming, Fault
 from spm_opt.execution.encoders import calibrated
 from spm_opt.execution.feed import FeedProfile, FeedRequests, NoRoom, Pace
 from spm_opt.execution.log import LogWriter, Write
@@ -319,6 +319,8 @@ class Executor:
                     "exception": exception,
                 }
             )
+        if completed:  # a safe stop's one line says how the run ended
+            _warn_if_goals_were_late(loop.timing)
         return ExecutionResult(
             completed,
             reason,
@@ -504,6 +506,23 @@ class Executor:
         finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+
+
+def _warn_if_goals_were_late(timing: CycleTiming) -> None:
+    """Warn once after a completed run whose goals reached the actuators late
+    (:data:`LATE_GOAL_S`): each makes an uneven step the plan does not have, and the joints'
+    jerk may break its limit there (``spm-opt evaluate`` names the limits broken near
+    one)."""
+    if timing.late_count:
+        _LOG.warning(
+            "%d goal(s) reached the actuators more than %.0f ms late (the latest %.1f ms, "
+            "the first at %.3f s): the control computer's loop lost time; keep its cores free "
+            "during a run",
+            timing.late_count,
+            1000 * LATE_GOAL_S,
+            1000 * timing.latest_s,
+            timing.late[0][0],
+        )
 
 
 def _request_events(before: tuple[float, bool], after: tuple[float, bool]) -> list[str]:

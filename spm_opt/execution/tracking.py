@@ -46,14 +46,10 @@ class Lead:
     ----------
     rate_s : ndarray, shape (2,), s
     acceleration_s2 : ndarray, shape (2,), s²
-    to_the_write : bool
-        Carry the reference on from its cycle's time to the goal's write first (see
-        :meth:`written_goal`); the lead "none" does not.
     """
 
     rate_s: np.ndarray
     acceleration_s2: np.ndarray
-    to_the_write: bool = True
 
     @classmethod
     def for_actuator(cls, actuator: Actuator, period_s: float, mode: str) -> Lead:
@@ -62,7 +58,7 @@ class Lead:
         if mode not in TRACKING_MODES:
             raise ValueError(f"tracking = {mode!r}: expected one of {', '.join(TRACKING_MODES)}")
         if mode == "none":
-            return cls(np.zeros(2), np.zeros(2), to_the_write=False)
+            return cls(np.zeros(2), np.zeros(2))
         position = np.asarray(actuator.position_loop_gain_per_s, dtype=float)
         velocity = np.asarray(actuator.velocity_loop_bandwidth_per_s, dtype=float)
         half = 0.5 * period_s
@@ -78,7 +74,8 @@ class Lead:
     ) -> np.ndarray:
         """:meth:`goal` of a reference state (rad, rad/s, rad/s²) sampled at its cycle's
         time and written ``late_s`` (s) after it, the reference carried on to the write
-        (q + q̇ d + q̈ d²/2, d = ``late_s``) where :attr:`to_the_write`.
+        (q + q̇ d + q̈ d²/2, d = ``late_s``); the lead "none" carries it too, and sends
+        the plan at its write.
 
         The actuator takes a goal when it arrives, and the cycle's reads before the write
         take a varying time: through the SDK and the emulated actuators at 100 Hz with both
@@ -94,7 +91,7 @@ class Lead:
         ``acceleration_s2`` d): 3.0e-4 rad at 100 rad/s³ and 6 ms with the prototype's lead.
         On the simulated robot a read takes no time: d = 0, and the goal is :meth:`goal`'s.
         """
-        if self.to_the_write and late_s > 0.0:
+        if late_s > 0.0:
             position = position + late_s * rate + 0.5 * late_s**2 * acceleration
             rate = rate + late_s * acceleration
         return self.goal(position, rate, acceleration)

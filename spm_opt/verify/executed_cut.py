@@ -70,9 +70,9 @@ from spm_opt.base.input_limits import (
 from spm_opt.execution.log import header_path, read_execution_log
 from spm_opt.execution.plant import StateTrace
 from spm_opt.judge.judge import judge
-from spm_opt.judge.limits import contour_tube, path_tolerance
+from spm_opt.judge.limits import ROBOT_RULES, contour_tube, path_tolerance
 from spm_opt.judge.motion import Motion
-from spm_opt.judge.report import Report
+from spm_opt.judge.report import Report, Violation
 from spm_opt.model.params import DEG, MM
 from spm_opt.problem.problem import Problem
 from spm_opt.problem.provenance import check_made_for, log_hint
@@ -97,6 +97,9 @@ MEASURED = tuple(
 """The columns a read fills: all empty in a row whose read failed."""
 
 REFERENCE = tuple(f"reference_{joint}_rad" for joint in JOINTS)
+LATE_GOAL_REACH_S = JERK_SPAN_S
+"""How near a late goal a robot limit's worst instant lies for the judge to name the two
+together, s: the jerk filter's span, over which one uneven goal step spreads."""
 TIME_TOLERANCE_S = 1e-6
 """How far a trace may fall short of the log's first and last times, s (the log writes
 times to the ns)."""
@@ -133,6 +136,14 @@ class ExecutionReport(Report):
         Each joint's largest speed, acceleration and jerk over the judged rows as a share of
         its limit, by the judged figures ("theta1 jerk": 0.95); a rule without a limit is
         left out.
+    late_goals : int
+        Goals that reached the actuators late (the header's ``cycle_timing``:
+        :data:`~spm_opt.execution.cycle.LATE_GOAL_S`); ``latest_goal_ms`` the latest, ms.
+    after_late_goals : dict of str to str
+        The robot limits broken (:data:`~spm_opt.judge.limits.ROBOT_RULES`) whose worst
+        instant lies within :data:`LATE_GOAL_REACH_S` of a late goal: where the loop's
+        timing, not the plan or the model, is the likely cause; each with the nearest
+        such goal.
     """
 
     angles: str = "measured"
@@ -148,8 +159,17 @@ class ExecutionReport(Report):
     resolution: dict[str, float] | None = None
     not_judged: list[str] = field(default_factory=list)
     limit_shares: dict[str, float] = field(default_factory=dict)
+    late_goals: int = 0
+    latest_goal_ms: float = 0.0
+    after_late_goals: dict[str, str] = field(default_factory=dict)
 
-    _NOT_IN_TABLE = (*Report._NOT_IN_TABLE, "resolution", "not_judged", "limit_shares")
+    _NOT_IN_TABLE = (
+        *Report._NOT_IN_TABLE,
+        "resolution",
+        "not_judged",
+        "limit_shares",
+        "after_late_goals",
+    )
 
     @property
     def accepted(self) -> bool:
@@ -169,6 +189,18 @@ class ExecutionReport(Report):
         if self.resolution is not None:
             notes.append(_resolution_line(self.resolution))
         notes += [f"Not judged, {why}." for why in self.not_judged]
+        if self.late_goals:
+            notes.append(
+                f"{self.late_goals} goal(s) reached the actuators late (the latest "
+                f"{self.latest_goal_ms:.1f} ms): the control computer's loop lost time"
+                + (
+                    "; broken near one: "
+                    + ", ".join(f"{k} ({v})" for k, v in self.after_late_goals.items())
+                    + "."
+                    if self.after_late_goals
+                    else "."
+                )
+            )
         return notes
 
 
@@ -288,6 +320,7 @@ def _judge(
     the joints' peak speeds between them, where known)."""
     qdd, jerk = smoothed_derivatives(run.t, qd, run.period_s)
     header = run.header
+    late = _late_goals(header)
     plan = header.get("plan") or {}
     tube = contour_tube(problem, executed=True)  # the reserve is the executed cut's
     path = path_tolerance(problem, executed=True)
@@ -326,7 +359,58 @@ def _judge(
         resolution=None if resolution is None else resolution.to_dict(),
         not_judged=list(unresolved.values()),
         limit_shares=joint_limit_shares(problem, motion),
+        late_goals=late.count,
+        latest_goal_ms=1000.0 * late.latest_s,
+        after_late_goals=_after_late_goals(report.violations, late.first),
     )
+
+
+@dataclass(frozen=True)
+class _LateGoals:
+    """A log header's ``cycle_timing.late_goals``: how many, the latest (s) and the first
+    ones listed as (cycle's time, late by) rows (k, 2), s."""
+
+    count: int
+    latest_s: float
+    first: np.ndarray
+
+
+def _late_goals(header: dict[str, Any]) -> _LateGoals:
+    """The late goals ``header`` records (none in a log from before they were recorded);
+    a damaged entry is an :class:`InputError`."""
+    timing = header.get("cycle_timing")
+    late = timing.get("late_goals") if isinstance(timing, dict) else None
+    if late is None:
+        return _LateGoals(0, 0.0, np.zeros((0, 2)))
+    try:
+        return _LateGoals(
+            int(late["count"]),
+            float(late["latest_s"]),
+            np.asarray(late["first"], dtype=float).reshape(-1, 2),
+        )
+    except (TypeError, KeyError, ValueError) as error:
+        raise InputError(
+            f"log header: cycle_timing.late_goals: expected count, latest_s and first "
+            f"([time, late] pairs) ({type(error).__name__}: {error})"
+        ) from None
+
+
+def _after_late_goals(violations: list[Violation], goals: np.ndarray) -> dict[str, str]:
+    """The robot limits among ``violations`` whose worst instant lies within
+    :data:`LATE_GOAL_REACH_S` of one of the late ``goals`` ((k, 2): cycle's time, late by,
+    s), each with the nearest such goal: when, from the worst instant, and how late."""
+    named = {}
+    for violation in violations:
+        if violation.rule not in ROBOT_RULES or len(goals) == 0:
+            continue
+        away = goals[:, 0] - violation.time_s
+        nearest = int(np.argmin(np.abs(away)))
+        if abs(away[nearest]) <= LATE_GOAL_REACH_S:
+            named[violation.limit] = (
+                f"a goal {1000 * goals[nearest, 1]:.1f} ms late, {away[nearest]:+.3f} s from "
+                "its worst"
+            )
+    return named
 
 
 def joint_limit_shares(problem: Problem, motion: Motion) -> dict[str, float]:
