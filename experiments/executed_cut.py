@@ -396,8 +396,8 @@ def repeats_table(rows: list[Row]) -> str:
             )
         cuts = [r.true_deviation_mm for r in repeated]
         late = [r for r in repeated if r.late_goals]
-        beyond = [r for r in repeated if _beyond_prediction(r)]
-        near = [r for r in beyond if set(_beyond_prediction(r)) <= set(r.broken_near_late_goals)]
+        beyond = [(r, limits) for r in repeated if (limits := set(_beyond_prediction(r)))]
+        near = [r for r, limits in beyond if limits <= set(r.broken_near_late_goals)]
         lines.append(
             (
                 *key,

@@ -3,11 +3,13 @@ study (the next run never starts), a connection that fails before anything moves
 again, and a bad input is one line with status 2 and nothing written."""
 
 import contextlib
+import dataclasses
 import os
 import signal
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 from conftest import experiment_module
@@ -41,58 +43,59 @@ class _Plant(so.SimulatedRobot):
         return super().read()
 
 
-@pytest.fixture
-def executed_cut(monkeypatch, tmp_path):
-    """experiments/executed_cut.py, its backends the ones each test makes (``made``)."""
-    module = experiment_module("executed_cut")
-    made = []
+@dataclasses.dataclass
+class _Study:
+    """experiments/executed_cut.py (``module``) with its backends replaced by the
+    :class:`_Plant` s :meth:`plants` makes, each kept in ``made``."""
 
-    def backend(make):
+    module: ModuleType
+    monkeypatch: pytest.MonkeyPatch
+    made: list = dataclasses.field(default_factory=list)
+
+    def plants(self, options) -> None:
+        """Give the n-th run made a :class:`_Plant` with ``options(n)`` (keywords)."""
+
         @contextlib.contextmanager
         def scripted(kind, problem, plan, plant, trace):
-            robot = make(len(made), problem.robot, plan.position(plan.start_time), plant)
-            made.append(robot)
+            start = plan.position(plan.start_time)
+            robot = _Plant(
+                problem.robot, start_rad=start, plant_robot=plant, **options(len(self.made))
+            )
+            self.made.append(robot)
             yield robot
             robot.trace.save(trace)
 
-        monkeypatch.setattr(module, "_backend", scripted)
+        self.monkeypatch.setattr(self.module, "_backend", scripted)
 
+
+@pytest.fixture
+def study(monkeypatch, tmp_path):
     monkeypatch.setattr(sys, "argv", ["executed_cut.py", "--out", str(tmp_path / "out"), *STUDY])
-    module.made, module.scripted_backend = made, backend
-    return module
+    return _Study(experiment_module("executed_cut"), monkeypatch)
 
 
-def test_a_sigterm_that_stops_a_run_of_the_study_ends_the_study(executed_cut, tmp_path, capfd):
-    def make(index, robot, start, plant):
-        return _Plant(robot, start_rad=start, plant_robot=plant, signal_in_plan=index == 0)
-
-    executed_cut.scripted_backend(make)
-    status = run_script(executed_cut.main)
+def test_a_sigterm_that_stops_a_run_of_the_study_ends_the_study(study, tmp_path, capfd):
+    study.plants(lambda index: {"signal_in_plan": index == 0})
+    status = run_script(study.module.main)
     assert status == 128 + signal.SIGTERM
-    assert len(executed_cut.made) == 1  # the next run never started
+    assert len(study.made) == 1  # the next run never started
     line = capfd.readouterr().err.strip().splitlines()[-1]
     assert line.startswith("executed_cut.py: stopped: SIGTERM during plan: the run ended in")
     assert not (tmp_path / "out" / "executed_cut.md").exists()
 
 
-def test_a_connection_that_fails_before_anything_moves_is_made_again(executed_cut, tmp_path):
-    def make(index, robot, start, plant):
-        return _Plant(robot, start_rad=start, plant_robot=plant, refuse=index in (0, 2, 3))
-
-    executed_cut.scripted_backend(make)
-    assert run_script(executed_cut.main) == 0
-    refused = [robot.refuse for robot in executed_cut.made]
+def test_a_connection_that_fails_before_anything_moves_is_made_again(study, tmp_path):
+    study.plants(lambda index: {"refuse": index in (0, 2, 3)})
+    assert run_script(study.module.main) == 0
+    refused = [robot.refuse for robot in study.made]
     assert refused[:5] == [True, False, True, True, False]  # the second run: three tries
     assert (tmp_path / "out" / "executed_cut.md").exists()
 
 
-def test_a_connection_that_keeps_failing_ends_the_study_in_one_line(executed_cut, tmp_path, capfd):
-    def make(index, robot, start, plant):
-        return _Plant(robot, start_rad=start, plant_robot=plant, refuse=True)
-
-    executed_cut.scripted_backend(make)
-    assert run_script(executed_cut.main) == 2
-    assert len(executed_cut.made) == executed_cut.CONNECT_TRIES
+def test_a_connection_that_keeps_failing_ends_the_study_in_one_line(study, capfd):
+    study.plants(lambda index: {"refuse": True})
+    assert run_script(study.module.main) == 2
+    assert len(study.made) == study.module.CONNECT_TRIES
     line = capfd.readouterr().err.strip().splitlines()[-1]
     assert line == "executed_cut.py: error: read: no status packet (scripted)"
 
