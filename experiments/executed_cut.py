@@ -553,9 +553,18 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--model: not with --lab-robot, which is also the prediction's model")
     lab_robot = None if args.lab_robot is None else so.load_robot(args.lab_robot)
     model = lab_robot if args.model is None else so.load_robot(args.model)
+    problems, planners = args.problems.split(","), args.planners.split(",")
+    unknown = [name for name in planners if name not in so.PLANNERS]
+    if unknown:
+        parser.error(
+            f"--planners {args.planners}: unknown {', '.join(unknown)}; expected "
+            f"some of {', '.join(sorted(so.PLANNERS))}"
+        )
+    missing = [name for name in problems if not (ROOT / "problems" / f"{name}.toml").is_file()]
+    if missing:
+        parser.error(f"--problems {args.problems}: no problems/{missing[0]}.toml")
     args.out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as work:
-        problems, planners = args.problems.split(","), args.planners.split(",")
         rows = run(args.backend, problems, planners, Path(work), model, lab_robot, args.repeats)
     data: list[dict[str, Any]] = [dataclasses.asdict(r) for r in rows]
     (args.out / "executed_cut.json").write_text(json.dumps(data, indent=2) + "\n")

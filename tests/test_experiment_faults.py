@@ -104,6 +104,7 @@ def test_a_connection_that_keeps_failing_ends_the_study_in_one_line(study, capfd
     ("script", "arguments", "message"),
     [
         ("executed_cut", ["--lab-robot", "missing.toml"], "error: missing.toml: no such file"),
+        ("executed_cut", ["--planners", "toppra,nosuch"], "--planners toppra,nosuch: unknown"),
         ("compensated_cut", ["--part", "2/2"], "--part 2/2: expected k/n, whole numbers"),
         ("compensated_cut", ["--speed-mm-s", "4,fast"], "--speed-mm-s 4,fast: expected"),
         ("compensated_cut", ["--merge"], "--merge: no compensated_cut.part*.json in"),
