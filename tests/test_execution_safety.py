@@ -56,6 +56,9 @@ pytestmark = pytest.mark.real_time
 
 DEG = np.pi / 180.0
 POSITIONS = ["position_theta1_rad", "position_theta2_rad"]
+LOG_FILES_WRITTEN_WITHIN_S = 0.5
+"""How long a run's log files (the CSV's first line, the header, the room set aside) may take
+to write on a loaded machine, s."""
 
 
 def window(plan: so.Trajectory, start_s: float, end_s: float, problem: so.Problem):
@@ -599,11 +602,15 @@ def test_a_real_time_log_starts_at_0_with_the_clocks_origin_in_the_header(
     result = execute(short, robot, hardware_problem, tmp_path / "run.csv", SETTINGS)
     assert result.succeeded, result.reason
     table, header = read_log(tmp_path / "run.csv")
-    worst_s = header["loop"]["period_error_max_ms"] / 1e3  # a late 1st cycle, a short 2nd
-    assert 0.0 <= table["time_s"].iloc[0] < PERIOD_S + worst_s
+    # time 0 is the reading the loop starts from; its first cycle comes once the log's files
+    # are written (a few ms)
+    assert 0.0 < table["time_s"].iloc[0] < LOG_FILES_WRITTEN_WITHIN_S
     assert before < header["clock_origin_s"] < before + 5.0
-    # on the log's clock, each cycle's reading falls between its start and the next's
-    read_at = robot.trace.arrays(header["clock_origin_s"])["time_s"][1:]
+    # on the log's clock, each cycle's reading falls between its start and the next's; the
+    # readings before the loop (on connecting, and the one it starts from) before time 0
+    read_at = robot.trace.arrays(header["clock_origin_s"])["time_s"]
+    assert np.sum(read_at < 0.0) == 2
+    read_at = read_at[read_at >= 0.0]
     begins = table["time_s"].to_numpy()
     assert np.all(read_at >= begins) and np.all(read_at[:-1] < begins[1:])
 

@@ -61,12 +61,13 @@ def test_failed_writes_stop_the_run_and_the_stop_starts_from_the_last_goal_recei
     assert table["time_s"].iloc[fault] == pytest.approx(FAULT_AT_S + 3 * PERIOD_S)
     assert failed[fault - 3 : fault + 1].all() and not failed[: fault - 3].any()
     # the plant's goal, read at each cycle's start, is the goal logged for the cycle before
-    # (the trace's first row is the executor's reading before the loop)
+    # (the trace's first two rows are the executor's readings before the loop: on
+    # connecting, and the one the loop starts from)
     trace = robot.trace.arrays()
-    np.testing.assert_allclose(trace["time_s"][1:], table["time_s"], atol=1e-9)
+    np.testing.assert_allclose(trace["time_s"][2:], table["time_s"], atol=1e-9)
     pulse = 2 * np.pi / hardware_problem.robot.actuator.pulses_per_rev
     logged = table[GOALS].to_numpy()
-    np.testing.assert_allclose(trace["goal_rad"][2:], logged[:-1], atol=pulse / 2)
+    np.testing.assert_allclose(trace["goal_rad"][3:], logged[:-1], atol=pulse / 2)
     np.testing.assert_array_equal(logged[fault], logged[fault - 4])  # nothing got through
     # the stop waited for the line: 6 more failed writes, then its whole profile
     assert header["stop"]["failed_writes"] == 6 and header["stop"]["stop_delivered"]

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pyigtl
@@ -47,13 +48,44 @@ def _execute(plan, log, port: int, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(command, cwd=ROOT, stderr=subprocess.PIPE, text=True)
 
 
+STALL_PERIODS = 5
+"""A loop that went this many control periods without a cycle stalled (the machine's doing:
+a loaded machine's scheduler, not the robot): the following-error check then rightly stops
+the run, since the reference ran on while no goal was sent."""
+
+
+def _stopped_after_a_stall(log: Path) -> bool:
+    """Whether the run of ``log`` ended in a safe stop seen at the first cycle after the
+    loop stalled (:data:`STALL_PERIODS`)."""
+    table, header = read_log(log)
+    if header["completed"] or header["stop"] is None:
+        return False
+    times = table["time_s"].to_numpy()
+    seen = int(np.searchsorted(times, header["stop"]["fault_seen_s"] - 1e-9))
+    period = 1.0 / header["settings"]["rate_hz"]
+    return 0 < seen < len(times) and times[seen] - times[seen - 1] > STALL_PERIODS * period
+
+
+ENDS = ("at rest", "fault")
+
+
+def _whole_run(skull_plan: Path, tmp_path: Path) -> tuple[subprocess.Popen, str, Peer, Path]:
+    """A run from 1°, −1° through the approach and the plan, seen by a peer. A run that a
+    stall of the loop stopped (:func:`_stopped_after_a_stall`) is made again, once."""
+    for attempt in (1, 2):
+        port, log = free_port(), tmp_path / f"run{attempt}.csv"
+        process = _execute(skull_plan, log, port, "--approach", "--start-deg", "1,-1")
+        peer = Peer(port)
+        peer.wait_for(lambda m: m.device == "RunState" and m.content[1] in ENDS, 180)
+        _, stderr = process.communicate(timeout=60)
+        peer.close()
+        if process.returncode == 0 or attempt == 2 or not _stopped_after_a_stall(log):
+            break
+    return process, stderr, peer, log
+
+
 def test_the_stream_of_a_whole_run_is_its_log(tmp_path, skull_plan):
-    port, log = free_port(), tmp_path / "run.csv"
-    process = _execute(skull_plan, log, port, "--approach", "--start-deg", "1,-1")
-    peer = Peer(port)
-    peer.wait_for(lambda m: m.device == "RunState" and m.content[1] in ("at rest", "fault"), 180)
-    _, stderr = process.communicate(timeout=60)
-    peer.close()
+    process, stderr, peer, log = _whole_run(skull_plan, tmp_path)
     assert process.returncode == 0, stderr
 
     table, header = read_log(log)

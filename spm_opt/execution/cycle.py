@@ -76,12 +76,13 @@ INTERRUPTED = "interrupted"
 
 class Ticker:
     """The loop's schedule: deadlines every period on the backend's clock, from ``origin``
-    (its time now, s); a late cycle skips the deadlines it missed rather than running them
-    in a burst. Times it gives are since ``origin`` (the log's clock)."""
+    (a time on it, s: the first deadline); a late cycle skips the deadlines it missed
+    rather than running them in a burst. Times it gives are since ``origin`` (the log's
+    clock)."""
 
-    def __init__(self, clock: Clock, period: float) -> None:
+    def __init__(self, clock: Clock, period: float, origin: float) -> None:
         self.clock, self.period = clock, period
-        self.origin = clock.now()
+        self.origin = origin
         self.ticks: list[float] = []
         self._next = self.origin
 
@@ -108,8 +109,8 @@ LATE_GOAL_S = 0.002
 """A goal is late when it reached the actuators more than this (s) after an even stream
 would have brought it (:meth:`CycleTiming.wrote`). Through the SDK and the emulated
 actuators under the real-time policy, 11 of 48 runs of the hardware problem had a late
-goal on an idle machine, none later than 4.7 ms, and 44 of 48 with two busy loops holding
-both cores, up to 11.3 ms (``docs/guide/executed-cut.md``)."""
+goal on an idle machine, none later than 4.7 ms, and 40 of 48 with two busy loops holding
+both cores, up to 10.8 ms (``docs/guide/executed-cut.md``)."""
 
 LATE_GOALS_KEPT = 100
 """How many late goals the header lists (the first; all are counted)."""
@@ -242,7 +243,11 @@ class ControlLoop:
     requests : FeedRequests
         The operator's requests (the status says whether the feed is held).
     first : Measurement
-        The reading taken on connecting: the commanded state starts at rest there.
+        The reading taken just before the log was written: the commanded state starts at
+        rest there.
+    origin_s : float, s
+        The loop's start on the backend's clock (its first deadline; the log's time 0),
+        taken with ``first`` (the log's header holds it).
     plan_duration_s : float, s
     previous : RunStatus or None
         The status before this run (its plan time shows until the plan phase begins).
@@ -259,6 +264,7 @@ class ControlLoop:
         writer: LogWriter,
         requests: FeedRequests,
         first: Measurement,
+        origin_s: float,
         plan_duration_s: float,
         previous: RunStatus | None,
         status_changed: threading.Condition | None = None,
@@ -270,8 +276,7 @@ class ControlLoop:
         self._torque_map = problem.robot.actuator.current_map
         self._current_unit_a = problem.robot.actuator.current_unit_a
         self._plan_duration = plan_duration_s
-        # the loop starts now, with its log's files written (the header's origin follows)
-        self.ticker = Ticker(backend.clock, 1.0 / settings.rate_hz)
+        self.ticker = Ticker(backend.clock, 1.0 / settings.rate_hz, origin_s)
         at = first.position_rad.copy()
         self.commanded = Commanded(at, np.zeros(2), np.zeros(2), at)
         self.last_measurement = first

@@ -26,8 +26,9 @@ back by the following error, and a goal whose write failed never reached them). 
 holds there until rest is proven: every sample over a window below the rest speed and each
 joint's position within a few encoder pulses. The log's header reports how long the stop
 took and how far each joint moved. A run is a success only when it completed and rest was
-proven at its end (:attr:`ExecutionResult.succeeded`). The log's times start at 0 at the
-loop's start; the header's ``clock_origin_s`` is that moment on the backend's clock.
+proven at its end (:attr:`ExecutionResult.succeeded`). The log's times count from the
+reading the loop starts from; the header's ``clock_origin_s`` is that moment on the
+backend's clock.
 
 This module holds the run's lifecycle and its phases along the plan; a cycle's I/O and
 checks are :mod:`spm_opt.execution.cycle`'s, the approach and the stop's ruckig moves
@@ -259,8 +260,19 @@ class Executor:
             "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
         preflight.check_log_room(log_path, self._longest_run_s(trajectory, approach), header)
+        # the loop starts from a reading taken now, not at connecting: the simulated robot
+        # integrates the time since (the heap's collection) here, where the loop's first
+        # cycle did on the wall clock (its next came 61-143 ms later on a loaded machine,
+        # and the reference ran on: a following error stopped runs). The header holds
+        # the loop's origin from the start: rewritten 0.1 s into the run, it made a goal
+        # 5-10 ms late in every simulated run on the wall clock
+        first, origin = self.backend.read(), self.backend.clock.now()
         self._writer = LogWriter(
-            log_path, header, settings.flush_interval_s, settings.log_stall_s, self._log_write
+            log_path,
+            {**header, "clock_origin_s": origin},
+            settings.flush_interval_s,
+            settings.log_stall_s,
+            self._log_write,
         )
         loop = self._loop = ControlLoop(
             self.problem,
@@ -270,12 +282,12 @@ class Executor:
             self._writer,
             self._requests,
             first,
+            origin,
             trajectory.duration,
             self._last_status,
             self._status_changed,
         )
         loop.phase = self._phase
-        self._writer.note({"clock_origin_s": loop.ticker.origin})
         self._feed_events = []
         reason, completed, at_rest, report, exception = "", False, False, None, None
         try:

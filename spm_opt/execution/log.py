@@ -173,7 +173,6 @@ class LogWriter:
         self._closing = threading.Event()
         self._wake = threading.Event()
         self._final: dict[str, Any] | None = None
-        self._noted: dict[str, Any] | None = None
         self._report: LogReport | None = None
         self._thread = threading.Thread(target=self._run, name="log-writer", daemon=True)
         self._thread.start()
@@ -210,11 +209,6 @@ class LogWriter:
         self._queued_bytes += len(line)
         self._queue.append(line)
 
-    def note(self, entries: dict[str, Any]) -> None:
-        """Add ``entries`` to the header, which the writer writes again, whole, on its next
-        pass (the control thread waits for nothing)."""
-        self._noted = {**(self._noted or {}), **entries}
-
     @property
     def fault(self) -> str | None:
         """Why the log is failing (a write that raised, or one that stalls), or None."""
@@ -246,10 +240,7 @@ class LogWriter:
         while not self._closing.is_set():
             self._wake.wait(self.flush_interval_s)
             self._wake.clear()
-            if self._take_note():
-                self._rewrite_header()
             self._write_queued()
-        self._take_note()
         self._write_queued()
         self._sync_and_close()
         self._report = self._write_header()
@@ -318,21 +309,6 @@ class LogWriter:
             self._fail(f"cannot sync {self.path.name}", error)
         finally:
             os.close(self._fd)
-
-    def _take_note(self) -> bool:
-        """Merge what :meth:`note` added into the header; whether there was anything."""
-        noted, self._noted = self._noted, None
-        if noted:
-            self.header.update(noted)
-        return bool(noted)
-
-    def _rewrite_header(self) -> None:
-        """Write the header again, as it stands (a failure is the :attr:`fault`)."""
-        try:
-            with self._busy():
-                write_atomically({header_path(self.path): _header_text(self.header)})
-        except OSError as error:
-            self._fail(f"cannot update {header_path(self.path).name}", error)
 
     def _write_header(self) -> LogReport:
         """Replace the header with the outcome and what the log kept, using the room set
