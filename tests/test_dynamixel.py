@@ -309,11 +309,14 @@ def test_a_retry_hides_one_lost_reply_but_counts_it(robot):
 def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot):
     """A sync write gets no reply: its failure is the port's. While the line takes no byte,
     ``write_goal`` fails after ``write_timeout_s`` (it would otherwise wait for ever), its
-    goal never arrives, and it is counted; once the line moves again, goals arrive."""
-    faults = Faults(write=RefusedWrites(at=0.0, seconds=0.4))
+    goal never arrives, and it is counted; once the line moves again, goals arrive. The
+    line stops 50 ms after the first goal, not at once: pyserial waits for room after every
+    write, even a whole one, so a line stopped right after that goal arrived failed the
+    write that delivered it (once, in a full run)."""
+    faults = Faults(write=RefusedWrites(at=0.05, seconds=0.4))
     with connected(robot, faults=faults) as (emulator, backend):
         backend.write_goal(np.zeros(2))  # starts the faults' clock
-        time.sleep(0.02)
+        time.sleep(0.07)
         start = time.perf_counter()
         with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
             backend.write_goal(np.full(2, 0.01))
