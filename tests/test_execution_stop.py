@@ -60,14 +60,14 @@ def test_failed_writes_stop_the_run_and_the_stop_starts_from_the_last_goal_recei
     fault = int(np.argmin(np.abs(table["time_s"].to_numpy() - seen)))
     assert table["time_s"].iloc[fault] == pytest.approx(FAULT_AT_S + 3 * PERIOD_S)
     assert failed[fault - 3 : fault + 1].all() and not failed[: fault - 3].any()
-    # the plant's goal, read at each cycle's start, is the goal logged for the cycle before
+    # the plant's goal, read after each cycle's write, is the goal logged for the cycle
     # (the trace's first two rows are the executor's readings before the loop: on
     # connecting, and the one the loop starts from)
     trace = robot.trace.arrays()
     np.testing.assert_allclose(trace["time_s"][2:], table["time_s"], atol=1e-9)
     pulse = 2 * np.pi / hardware_problem.robot.actuator.pulses_per_rev
     logged = table[GOALS].to_numpy()
-    np.testing.assert_allclose(trace["goal_rad"][3:], logged[:-1], atol=pulse / 2)
+    np.testing.assert_allclose(trace["goal_rad"][2:], logged, atol=pulse / 2)
     np.testing.assert_array_equal(logged[fault], logged[fault - 4])  # nothing got through
     # the stop waited for the line: 6 more failed writes, then its whole profile
     assert header["stop"]["failed_writes"] == 6 and header["stop"]["stop_delivered"]
@@ -75,6 +75,51 @@ def test_failed_writes_stop_the_run_and_the_stop_starts_from_the_last_goal_recei
         table, hardware_problem, stop_bound(hardware_problem, move)
     )
     assert header["stop"]["at_rest"]
+
+
+class _WriteRecorder(ScriptedRobot):
+    """The scripted robot, noting each goal written and when (the simulated clock, s)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)
+        self.writes: list[tuple[float, np.ndarray]] = []
+
+    def write_goal(self, position_rad: np.ndarray) -> None:
+        super().write_goal(position_rad)
+        self.writes.append((self.clock.now(), np.array(position_rad, dtype=float)))
+
+
+def test_a_fault_a_reading_shows_replaces_its_cycles_goal_with_the_stops_first(
+    hardware_problem, move, tmp_path
+):
+    """The goal goes out before the read: when the reading shows a hardware error, the
+    cycle writes the stop's first goal at once in its place, and the stop begins from the
+    goal before, one period along, as if the plan's goal had never gone out."""
+    robot = _WriteRecorder(
+        hardware_problem.robot, move.position(0.0), hardware_error=(FAULT_AT_S, 1 << 2)
+    )
+    result = execute(move, robot, hardware_problem, tmp_path / "run.csv", SETTINGS)
+    assert result.reason == "hardware error on actuator 2: overheating", result.reason
+    table, header = read_log(tmp_path / "run.csv")
+    seen = header["stop"]["fault_seen_s"]
+    fault = int(np.argmin(np.abs(table["time_s"].to_numpy() - seen)))
+    assert table["phase"].iloc[fault] == "stop" and table["phase"].iloc[fault - 1] == "plan"
+    # two writes at the fault cycle's instant: the plan's goal, then the stop's first
+    origin = header["clock_origin_s"]
+    at_fault = [goal for time, goal in robot.writes if abs(time - origin - seen) < 1e-9]
+    assert len(at_fault) == 2
+    plan_goal, stop_goal = at_fault
+    np.testing.assert_allclose(stop_goal, table[GOALS].iloc[fault].to_numpy(), atol=1e-9)
+    assert np.max(np.abs(plan_goal - stop_goal)) > 0.0
+    # the stop's first reference is one period along from the row before's, not two: it
+    # begins from the goal before the replaced one (its rate and acceleration carried)
+    references = table[["reference_theta1_rad", "reference_theta2_rad"]].to_numpy()
+    rates = np.gradient(references[:fault], table["time_s"].to_numpy()[:fault], axis=0)
+    step = references[fault] - references[fault - 1]
+    np.testing.assert_allclose(step, rates[fault - 1] * PERIOD_S, atol=0.05 * np.max(np.abs(step)))
+    assert_the_commanded_stop_kept_its_limits(
+        table, hardware_problem, stop_bound(hardware_problem, move)
+    )
 
 
 def test_alternating_read_and_write_failures_are_one_run_of_failures(

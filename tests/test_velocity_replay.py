@@ -120,25 +120,42 @@ def test_a_robot_that_never_moves_keeps_the_prior(excitation, tmp_path):
     assert replay.seconds == pytest.approx(table["time_s"].iloc[-1] - begun)
 
 
-class LateWrites(SimulatedRobot):
-    """A simulated robot whose goal writes return 3 ms after they are asked (a bus)."""
+class SlowBus(SimulatedRobot):
+    """A simulated robot on a bus: a goal write returns 1 ms after it is asked, a read
+    samples the plant 3 ms after it is asked and returns 3 ms after that (its middle is
+    when it sampled)."""
 
     def write_goal(self, position_rad: np.ndarray) -> None:
-        self.clock.sleep_until(self.clock.now() + 0.003)
+        self.clock.sleep_until(self.clock.now() + 0.001)
         super().write_goal(position_rad)
 
+    def read(self):  # noqa: ANN201 - the backend's
+        self.clock.sleep_until(self.clock.now() + 0.003)
+        measurement = super().read()
+        self.clock.sleep_until(self.clock.now() + 0.003)
+        return measurement
 
-def test_goals_that_arrive_late_are_replayed_when_the_log_says_they_arrived(excitation, tmp_path):
+
+def test_each_goal_is_replayed_when_the_log_says_it_arrived_before_the_read(excitation, tmp_path):
+    """The loop writes, then reads: the replay gives the model each goal 1 ms after its
+    row's time and reads the model 3 ms later, in that order."""
     problem, plan = excitation
-    log, truth = plant_log(tmp_path, problem, plan, (100.0, 250.0), backend_type=LateWrites)
+    log, truth = plant_log(tmp_path, problem, plan, (100.0, 250.0), backend_type=SlowBus)
     header = json.loads(header_path(log).read_text())
     timing = header["cycle_timing"]
     means = {key: timing[key] for key in ("read_s", "goal_written_s")}
-    assert means == pytest.approx({"read_s": 0.0, "goal_written_s": 0.003})
-    assert timing["late_goals"]["count"] == 0  # every goal 3 ms late: a steady delay
+    assert means == pytest.approx({"read_s": 0.004, "goal_written_s": 0.001})
+    assert timing["late_goals"]["count"] == 0  # every goal 1 ms late: a steady delay
     replay = replay_bandwidth([log], problem.robot)
     assert replay.carried.all() and replay.bandwidth_per_s == pytest.approx(truth, rel=0.05)
-    # the same log played as if each goal arrived at its row's time misses
+    # each goal given after the read, as a replay that always read first would give it
+    # (the model brought to the read, then the goal: 3 ms late), misses
+    timing["goal_written_s"] = timing["read_s"]
+    header_path(log).write_text(json.dumps(header))
+    late = replay_bandwidth([log], problem.robot)
+    assert np.all(late.residual_rad_s > 2.0 * replay.residual_rad_s), (late, replay)
+    # and so does the log played as if each goal arrived and each read sampled at its
+    # row's time (a log without cycle_timing)
     del header["cycle_timing"]
     header_path(log).write_text(json.dumps(header))
     blind = replay_bandwidth([log], problem.robot)

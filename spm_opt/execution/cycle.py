@@ -1,11 +1,23 @@
-"""One control cycle's I/O and checks: wait for the deadline, read both actuators, judge
-the reading, write the goal, count the failures and log the sample.
+"""One control cycle's I/O and checks: wait for the deadline, write the goal, read both
+actuators, judge the reading, count the failures and log the sample.
+
+The goal goes out before the read. A goal depends only on the plan, the feed and the
+stop, never on the cycle's own reading, and the read is a bus transaction whose replies
+take as long as the actuators and the machine let them: through the SDK and the emulated
+actuators with two busy loops holding both cores, reads before the write made goals up to
+10.8 ms late, and 7 of 32 led and unled runs of the hardware problem broke a joint limit
+their predictions kept (up to 1.709 times the predicted jerk); with the write first, none
+of 48 did, the worst 1.047 times (``docs/guide/run.md``). A reading that asks for the safe
+stop is seen just after the write, and the stop's first goal replaces that cycle's goal
+at once, from the goal before it (:attr:`Cycle.before`): the stream is the one a check
+before the write gives, with the plan's goal held for the read's duration in between.
 
 The current a cycle logs is the cycle's own Present Current read, or, with
 :attr:`~spm_opt.execution.settings.ExecutionSettings.current_reads_per_cycle` N > 0, the
 mean over the last goal's hold: N reads, one at a random instant in each of N equal parts
 of the span from that goal's write to two average reads before the deadline, and the
-cycle's own read for the rest, up to this cycle's write (weighted by their spans).
+cycle's own read, made just after this cycle's write, for the rest, up to that write
+(weighted by their spans).
 
 Why. A goal is a step, and the actuator's velocity loop answers each step with a current
 that surges and then reverses within the period; one read, made at the same instant of
@@ -43,6 +55,7 @@ for them (``docs/guide/run.md``).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import random
@@ -176,6 +189,17 @@ class CycleTiming:
 
 
 @dataclass
+class Commanded:
+    """The reference of the last goal the actuators received: position, rate, acceleration
+    (the stop starts from here), and that goal (the reference led by the loop's lag)."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    goal: np.ndarray
+
+
+@dataclass
 class Cycle:
     """One control cycle: when it began (s, the time its goal is sampled at), what it
     read and what went wrong (``notes``; ``unexpected``: the backend raised something
@@ -190,6 +214,12 @@ class Cycle:
     """The same reads (k, 2), A, in the order they were made."""
     written_at: float | None = None
     """When this cycle's goal write returned, on the clock (s)."""
+    before: Commanded | None = None
+    """The commanded state before this cycle's first goal write (None until one was
+    tried): a fault its reading shows stops from here, the stop's first goal replacing
+    this cycle's (:func:`~spm_opt.execution.stop.safe_stop`)."""
+    read_made: bool = False
+    """Whether its actuators were read (:meth:`ControlLoop.read`), successfully or not."""
     following_error: np.ndarray | None = None
     read_failed: bool = False
     write_failed: bool = False
@@ -210,17 +240,6 @@ class Fault(Exception):
     def __init__(self, reason: str, cycle: Cycle | None = None, logged: bool = False) -> None:
         super().__init__(reason)
         self.cycle, self.logged = cycle, logged
-
-
-@dataclass
-class Commanded:
-    """The reference of the last goal the actuators received: position, rate, acceleration
-    (the stop starts from here), and that goal (the reference led by the loop's lag)."""
-
-    position: np.ndarray
-    velocity: np.ndarray
-    acceleration: np.ndarray
-    goal: np.ndarray
 
 
 class ControlLoop:
@@ -294,9 +313,9 @@ class ControlLoop:
 
     # ------------------------------------------------------------------ I/O
     def begin(self) -> Cycle:
-        """Read the current while the last goal is held, wait for the next deadline and
-        read both actuators; the reading's current is the mean of the period's current
-        reads, if any was made."""
+        """Read the current while the last goal is held and wait for the next deadline:
+        the cycle, its goal yet to be sent (:meth:`send`) and its actuators read
+        (:meth:`read`)."""
         currents, span, unexpected = self._currents_between()
         cycle = Cycle(self.ticker.wait())
         if currents:
@@ -304,6 +323,14 @@ class ControlLoop:
             cycle.held_reads = np.array(currents)
         if unexpected is not None:
             cycle.notes.append(self._failure("current read", unexpected, cycle))
+        return cycle
+
+    def read(self, cycle: Cycle) -> None:
+        """Read both actuators into ``cycle`` once (again, nothing); the reading's current
+        is the mean of the period's current reads, if any was made."""
+        if cycle.read_made:
+            return
+        cycle.read_made = True
         try:
             before = self._backend.clock.now()
             cycle.measurement = self.last_measurement = self._backend.read()
@@ -313,7 +340,6 @@ class ControlLoop:
             cycle.read_failed = True
             self.reads_failed += 1
             cycle.notes.append(self._failure("read", error, cycle))
-        return cycle
 
     def _currents_between(
         self,
@@ -357,6 +383,9 @@ class ControlLoop:
         counts as not delivered, though a port can fail a packet that left (see
         :mod:`spm_opt.execution.dynamixel`); the stop's first goal, one period along from
         the last goal known, is then the one that arrived to within q̈ T²."""
+        commanded = self.commanded
+        if cycle.before is None:
+            cycle.before = dataclasses.replace(commanded)
         late = self._backend.clock.now() - self.ticker.origin - cycle.time_s
         goal = self._lead.written_goal(position, velocity, acceleration, late)
         try:
@@ -368,7 +397,6 @@ class ControlLoop:
             return False
         cycle.written_at = self._goal_written_at = self._backend.clock.now()
         self.timing.wrote(cycle.time_s, cycle.written_at - self.ticker.origin - cycle.time_s, late)
-        commanded = self.commanded
         commanded.position, commanded.velocity = position, velocity
         commanded.acceleration, commanded.goal = acceleration, goal
         return True

@@ -8,8 +8,8 @@ passes), so that the plan starts with the load taken up by the loop. A stop aske
 before or during :meth:`Executor.run` is honoured (and forgotten when the run ends):
 before connecting, the run ends with nothing moved or written
 (:class:`~spm_opt.base.errors.RunInterrupted`); after, in the first control cycle, before any
-goal of the plan goes out. Then a fixed-rate loop on the backend's clock reads both
-actuators, checks them, writes the next goal positions and logs the sample (queued in
+goal of the plan goes out. Then a fixed-rate loop on the backend's clock writes the next
+goal positions, reads both actuators, checks them and logs the sample (queued in
 memory: a thread of the log's own writes it, :mod:`spm_opt.execution.log`, so the loop and
 the stop never wait on the disk). The goals follow the plan at the operator's feed
 (:mod:`spm_opt.execution.feed`): held, resumed and overridden from any thread, always on
@@ -376,8 +376,9 @@ class Executor:
             if segment.duration - elapsed < CLOCK_EPSILON_S:  # rounding must not add a cycle
                 elapsed = segment.duration
             reference = segment.at(elapsed)
-            loop.check(cycle, reference, self._stop_requested)
             loop.send(cycle, *reference)
+            loop.read(cycle)
+            loop.check(cycle, reference, self._stop_requested)
             loop.end(phase, cycle, checked=True)
             if elapsed >= segment.duration:
                 return
@@ -414,8 +415,9 @@ class Executor:
                 asked = requested
                 loop.pace = pace
                 reference = profile.goal(pace)
-                loop.check(cycle, reference, self._stop_requested)
                 loop.send(cycle, *reference)
+                loop.read(cycle)
+                loop.check(cycle, reference, self._stop_requested)
                 loop.end("plan", cycle, checked=True)
                 for event in hold.watch(cycle.time_s, cycle.measurement, pace):
                     self._feed_event(cycle, pace, event)

@@ -123,8 +123,9 @@ def hold_until_rest(
     while True:
         cycle = loop.begin()
         begin = cycle.time_s if begin is None else begin
-        inspect(cycle)
         loop.send(cycle, target, np.zeros(2), np.zeros(2))
+        loop.read(cycle)
+        inspect(cycle)
         loop.end(phase, cycle, checked=checked)
         if window.add(cycle.time_s, cycle.measurement):
             return cycle.time_s, window

@@ -23,15 +23,18 @@ def safe_stop(
     loop: ControlLoop, fault: Fault, problem: Problem, settings: ExecutionSettings
 ) -> StopReport:
     """Stop from the last goal delivered, in the cycle that saw ``fault`` (unless that one
-    is already logged), hold there and report how it ended."""
+    is already logged; a goal that cycle wrote before its reading showed the fault is
+    replaced: the stop starts from the goal before it), hold there and report how it
+    ended."""
     _LOG.info("safe stop: %s", fault)
     loop.phase = "stop"
     seen = fault.cycle.time_s if fault.cycle is not None else loop.ticker.now()
     before = loop.last_measurement
     reads, writes = loop.reads_failed, loop.writes_failed
     errors: list[str] = []
-    segment = jerk_limited_move("stop", loop.commanded, settings.joint_limits(problem), target=None)
     first = None if fault.logged else fault.cycle
+    origin = loop.commanded if first is None or first.before is None else first.before
+    segment = jerk_limited_move("stop", origin, settings.joint_limits(problem), target=None)
     delivered = _stream(loop, segment, first, errors, seen + segment.duration + settings.hold_s)
     at_rest, rest, confirmed = _hold(loop, problem, settings, errors)
     travel = _travel(before, loop.last_measurement)
@@ -63,7 +66,6 @@ def _stream(
     elapsed, cycle = 0.0, first
     while True:
         cycle = cycle or loop.begin()
-        observe_hardware_errors(cycle, errors)
         previous_s, delivered = loop.previous
         step = cycle.time_s - previous_s if delivered else loop.ticker.period
         t = min(elapsed + step, segment.duration)
@@ -71,6 +73,8 @@ def _stream(
             t = segment.duration
         if loop.send(cycle, *segment.at(t)):
             elapsed = t
+        loop.read(cycle)  # the cycle that saw the fault has read already
+        observe_hardware_errors(cycle, errors)
         loop.end("stop", cycle, checked=False)
         if elapsed >= segment.duration:
             return True

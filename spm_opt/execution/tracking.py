@@ -77,19 +77,20 @@ class Lead:
         (q + q̇ d + q̈ d²/2, d = ``late_s``); the lead "none" carries it too, and sends
         the plan at its write.
 
-        The actuator takes a goal when it arrives, and the cycle's reads before the write
-        take a varying time: through the SDK and the emulated actuators at 100 Hz with both
-        cores busy, the writes of five runs began a median 1.9–2.4 ms after their cycles'
-        times and up to 6.0–9.4 ms. A goal sampled at its cycle's time arrives that far
-        behind its reference, and a late one makes the steps between goals uneven: a jerk
-        the plan does not have. On the simulated robot with every 20th read 6 ms late, the
-        hardware problem's toppra plan, led, reached 137 % of its jerk limit with goals
-        sampled at their cycles' time, 93 % with the reference carried, 92 % with no read
-        late (``tests/test_tracking.py``). The goal before a late one is still held longer,
+        The actuator takes a goal when it arrives, and a goal can be written later than
+        its cycle's time: the loop writes before it reads (:mod:`spm_opt.execution.cycle`),
+        but a process on a busy machine can lose its core between the wake-up and the
+        write. A goal sampled at its cycle's time arrives that far behind its reference,
+        and a late one makes the steps between goals uneven: a jerk the plan does not
+        have. On the simulated robot with every 20th goal 6 ms late, the hardware problem's
+        toppra plan, led, reached 120.5 % of its jerk limit with goals sampled at their
+        cycles' time, 91.8 % with the reference carried, 91.9 % with none late
+        (``tests/test_tracking.py``). The goal before a late one is still held longer,
         which carrying does not undo. Carried by q, q̇ and q̈ alone, the led goal misses the
         reference's jerk q⃛ over d by at most q⃛ (d³/6 + ``rate_s`` d²/2 +
         ``acceleration_s2`` d): 3.0e-4 rad at 100 rad/s³ and 6 ms with the prototype's lead.
-        On the simulated robot a read takes no time: d = 0, and the goal is :meth:`goal`'s.
+        On the simulated robot computing a goal takes no time: d = 0, and the goal is
+        :meth:`goal`'s.
         """
         if late_s > 0.0:
             position = position + late_s * rate + 0.5 * late_s**2 * acceleration

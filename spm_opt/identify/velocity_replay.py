@@ -11,7 +11,8 @@ dynamics, friction, gear losses and rotor inertia, the position loop's Kp, the p
 first reading is and plays the log at the instants its header's ``cycle_timing`` records
 (0 on the simulated robot; through the SDK, the read's middle and the goal write some
 milliseconds after each row's time): it reads the model's Present Velocity when the row's
-read sampled and gives it the row's goal when the write returned. Each joint's ωv
+read sampled and gives it the row's goal when the write returned, in the order they came
+(the loop writes first; a log made before it did reads first). Each joint's ωv
 minimises the RMS of the model's velocity less the logged one over the first
 :data:`REPLAY_SECONDS` of the logs' plans (a log is replayed from its first reading, through
 the approach and the hold at the plan's start, which only set the model's state): a grid
@@ -47,6 +48,7 @@ from spm_opt.base.markdown import markdown_table
 from spm_opt.execution.log import read_execution_log
 from spm_opt.execution.plant import DynamixelPlant, closed_loop_settings
 from spm_opt.identify.samples import check_log_rows, log_values
+from spm_opt.model.actuator import Actuator
 from spm_opt.model.params import Robot
 
 __all__ = [
@@ -267,6 +269,13 @@ def _replayed_log(path: Path, seconds: float) -> _Log:
     )
 
 
+def _write(plant: DynamixelPlant, actuator: Actuator, time_s: float, goal: np.ndarray) -> None:
+    """Give ``plant`` a logged goal (rad; none where NaN) at ``time_s`` (s)."""
+    plant.advance_to(time_s)
+    if np.all(np.isfinite(goal)):
+        plant.goal_position_rad[:] = actuator.angle(actuator.pulses(goal))
+
+
 def _residual(logs: list[_Log], robot: Robot, bandwidth: tuple[float, float]) -> np.ndarray:
     """RMS per joint (2,), rad/s, of the model's Present Velocity less the logged one, the
     model ``robot`` with ωv ``bandwidth`` (1/s per joint)."""
@@ -283,12 +292,14 @@ def _residual(logs: list[_Log], robot: Robot, bandwidth: tuple[float, float]) ->
         for joint in range(2):
             plant.enable_torque(joint, True)
         replayed = np.empty_like(log.velocity)
+        write_first = log.written_s <= log.read_s  # the loop's order (its timing says)
         for k, now in enumerate(log.time_s - log.time_s[0]):
+            if write_first:
+                _write(plant, actuator, now + log.written_s, log.goal[k])
             plant.advance_to(now + log.read_s)
             replayed[k] = actuator.rate(plant.present_velocity_units())
-            plant.advance_to(now + log.written_s)
-            if np.all(np.isfinite(log.goal[k])):
-                plant.goal_position_rad[:] = actuator.angle(actuator.pulses(log.goal[k]))
+            if not write_first:
+                _write(plant, actuator, now + log.written_s, log.goal[k])
         error = replayed - log.velocity
         seen = np.isfinite(error) & log.judged[:, None]
         squares += np.sum(np.where(seen, error, 0.0) ** 2, axis=0)
