@@ -20,8 +20,9 @@ cycles with a failed read or write longer than the retry budget, a log write tha
 stalls (in the approach, the hold at the start, the plan and the settle; during the stop
 and the hold the samples wait in memory), SIGINT or SIGTERM, any other exception raised by
 the backend or in the loop, the robot is brought to rest by a jerk-limited ruckig stop that
-starts, in the cycle that saw the fault, from the last goal the actuators received (so the
-goal stream stays continuous: starting from the measured position would make the goal jump
+starts, in the cycle that saw the fault, from the last goal the actuators received before
+it (a goal that cycle wrote before its reading showed the fault is replaced; so the goal
+stream stays continuous: starting from the measured position would make the goal jump
 back by the following error, and a goal whose write failed never reached them). It then
 holds there until rest is proven: every sample over a window below the rest speed and each
 joint's position within a few encoder pulses. The log's header reports how long the stop
