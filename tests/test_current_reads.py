@@ -50,24 +50,20 @@ def test_each_part_of_a_hold_is_read_once_and_the_log_holds_their_mean(hardware_
     assert header["current_reads"]["per_cycle"] == READS
     assert header["current_reads"]["missed"] == 0
 
-    # between two writes: the first's cycle's own read, then READS current reads, one in
-    # each quarter of the span from the write to the next deadline (the simulated reads
-    # take no time); the second's cycle logs those and its own read, just after it
+    # between two writes: READS current reads, one in each quarter of the span from the
+    # write to the next deadline (the simulated reads take no time), then the cycle's read
     writes = [k for k, (kind, _, _) in enumerate(robot.events) if kind == "write"]
     period = 1.0 / RATE_HZ
     logged = []
     for first, second in zip(writes[:-1], writes[1:], strict=True):
         between = robot.events[first + 1 : second]
         kinds = [kind for kind, _, _ in between]
-        assert kinds == ["read"] + ["current"] * READS, kinds
-        written_at, deadline = robot.events[first][1], robot.events[second][1]
+        assert kinds == ["current"] * READS + ["read"], kinds
+        written_at, deadline = robot.events[first][1], between[-1][1]
         assert deadline == pytest.approx(written_at + period, abs=1e-9)
-        parts = [(time - written_at) / (period / READS) for _, time, _ in between[1:]]
+        parts = [(time - written_at) / (period / READS) for _, time, _ in between[:READS]]
         assert [int(np.floor(p + 1e-9)) for p in parts] == list(range(READS)), parts
-        own = robot.events[second + 1]
-        assert own[0] == "read" and own[1] == deadline
-        held = [current for _, _, current in between[1:]]
-        logged.append(np.array([*held, own[2]]))
+        logged.append(np.array([current for _, _, current in between[: READS + 1]]))
     # the log's current is the held reads' mean (the write takes no time: the own read's
     # share is 0), and its torque's sides the means of the held reads' torques on the
     # positive side and on the negative: a read of two units or more by its own sign, one

@@ -1,24 +1,28 @@
 """One control cycle's I/O and checks: wait for the deadline, write the goal, read both
 actuators, judge the reading, count the failures and log the sample.
 
-The goal goes out before the read. A goal depends only on the plan, the feed and the
-stop, never on the cycle's own reading, and the read is a bus transaction whose replies
-take as long as the actuators and the machine let them: through the SDK and the emulated
-actuators with two busy loops holding both cores, 40 of the hardware problem's 48 runs
-had goals late, up to 10.8 ms, while the reads came before the write, and 7 of the 32
-led and unled runs broke a joint limit their predictions kept (up to 1.709 times the
-predicted jerk); with the write first, 10 of 48 had late goals and 1 broke a limit, beside
-a goal 12.1 ms late (``docs/guide/executed-cut.md``). A reading that asks for the safe
-stop is seen just after the write, and the stop's first goal replaces that cycle's goal
-at once, from the goal before it (:attr:`Cycle.before`): the stream is the one a check
-before the write gives, with the plan's goal held for the read's duration in between.
+The goal goes out before the read (but where current reads are asked for, below). A goal
+depends only on the plan, the feed and the stop, never on the cycle's own reading, and
+the read is a bus transaction whose replies take as long as the actuators and the
+machine let them: through the SDK and the emulated actuators with two busy loops holding
+both cores, 40 of the hardware problem's 48 runs had goals late, up to 10.8 ms, while
+the reads came before the write, and 7 of the 32 led and unled runs broke a joint limit
+their predictions kept (up to 1.709 times the predicted jerk); with the write first, 10
+of 48 had late goals and 1 broke a limit, beside a goal 12.1 ms late
+(``docs/guide/executed-cut.md``). A reading that asks for the safe stop is seen just
+after the write, and the stop's first goal replaces that cycle's goal at once, from the
+goal before it (:attr:`Cycle.before`): the stream is the one a check before the write
+gives, with the plan's goal held for the read's duration in between.
 
 The current a cycle logs is the cycle's own Present Current read, or, with
 :attr:`~spm_opt.execution.settings.ExecutionSettings.current_reads_per_cycle` N > 0, the
 mean over the last goal's hold: N reads, one at a random instant in each of N equal parts
 of the span from that goal's write to two average reads before the deadline, and the
-cycle's own read, made just after this cycle's write, for the rest, up to that write
-(weighted by their spans).
+cycle's own read for the rest, up to this cycle's write (weighted by their spans). So with
+N > 0 (identification's excitation logs) the cycle reads before it writes: its own read
+made just after the write, which on the emulated actuators may sample the new goal's hold,
+put viscous friction of +0.020 N·m·s/rad where there is none into
+``tests/test_identify_pipeline.py``'s identification (+0.012 in a fresh-clone run).
 
 Why. A goal is a step, and the actuator's velocity loop answers each step with a current
 that surges and then reverses within the period; one read, made at the same instant of
@@ -316,7 +320,8 @@ class ControlLoop:
     def begin(self) -> Cycle:
         """Read the current while the last goal is held and wait for the next deadline:
         the cycle, its goal yet to be sent (:meth:`send`) and its actuators read
-        (:meth:`read`)."""
+        (:meth:`read`), unless current reads are asked for (outside the stop): then it reads
+        them now, before the write, for the hold's last part (the module's docstring)."""
         currents, span, unexpected = self._currents_between()
         cycle = Cycle(self.ticker.wait())
         if currents:
@@ -324,6 +329,8 @@ class ControlLoop:
             cycle.held_reads = np.array(currents)
         if unexpected is not None:
             cycle.notes.append(self._failure("current read", unexpected, cycle))
+        if self._settings.current_reads_per_cycle and self.phase != "stop":
+            self.read(cycle)  # the hold's last part: read before the write
         return cycle
 
     def read(self, cycle: Cycle) -> None:
