@@ -123,10 +123,16 @@ class Peer:
                 m for m in self.messages if m.device == device and (kind is None or m.kind == kind)
             ]
 
-    def wait_for(self, predicate, timeout_s: float = 60.0) -> Received:
-        """The first message ``predicate`` holds for, waiting for it."""
+    def received(self) -> int:
+        """How many messages have been received so far (a mark for :meth:`wait_for`)."""
+        with self._lock:
+            return len(self.messages)
+
+    def wait_for(self, predicate, timeout_s: float = 60.0, since: int = 0) -> Received:
+        """The first message from the ``since``-th on that ``predicate`` holds for, waiting
+        for it."""
         deadline = time.monotonic() + timeout_s
-        seen = 0
+        seen = since
         while time.monotonic() < deadline:
             with self._lock:
                 fresh = self.messages[seen:]

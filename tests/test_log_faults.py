@@ -74,15 +74,17 @@ class FaultyDisk:
 
 class PhaseTrigger(SimulatedRobot):
     """The simulated robot; when the executor's status shows ``phase`` (in the plan phase,
-    ``ARM_AT_PLAN_S`` along the plan, in its fastest part), it arms the disk and reads on
-    only once the writer has met the failure (and a blocked write has been blocked longer
-    than the stall limit). With ``stop_at_plan_s`` it also asks for a stop once the plan
-    is that far along (s of its own time)."""
+    ``ARM_AT_PLAN_S`` along the plan, in its fastest part), it arms the disk and, a cycle
+    later, reads on only once the writer has met the failure (and a blocked write has been
+    blocked longer than the stall limit). With ``stop_at_plan_s`` it also asks for a stop
+    once the plan is that far along (s of its own time)."""
 
     executor: Executor
     phase: str
     disk: FaultyDisk
     stop_at_plan_s: float | None = None
+
+    waited = False
 
     def read(self):  # noqa: ANN201 - the backend's
         status = self.executor.status
@@ -90,11 +92,15 @@ class PhaseTrigger(SimulatedRobot):
             if self.stop_at_plan_s is not None and status.plan_time_s >= self.stop_at_plan_s:
                 self.executor.stop("operator stop")
             along = status.phase != "plan" or status.plan_time_s >= ARM_AT_PLAN_S
-            if status.phase == self.phase and along and not self.disk.armed:
-                self.disk.armed = True
+            if self.disk.armed and not self.waited:
+                # a cycle after arming: its sample is queued, so the writer has a line to
+                # write (the writer may have written every line before the arming)
+                self.waited = True
                 assert self.disk.met.wait(EVENT_TIMEOUT_S), "the writer never wrote"
                 if self.disk.kind == "block":
                     time.sleep(1.5 * SETTINGS.log_stall_s)  # past the stall limit, surely
+            elif status.phase == self.phase and along and not self.disk.armed:
+                self.disk.armed = True
         return super().read()
 
 

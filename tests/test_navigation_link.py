@@ -101,8 +101,9 @@ def test_hold_resume_and_stop_act_as_the_keys(tmp_path):
         denied = peer.wait_for(lambda m: m.device == "CMD_9")
         peer.send(pyigtl.StringMessage("HOLD", device_name="CMD_1"))
         peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "held")
+        resumed = peer.received()  # the "running" from before the hold must not count
         peer.send(pyigtl.StringMessage("resume", device_name="CMD_2"))
-        peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "running")
+        peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "running", since=resumed)
         sent = time.monotonic()
         peer.send(pyigtl.StringMessage("STOP", device_name="CMD_3"))
         stopping = peer.wait_for(lambda m: m.device == "RunState" and m.content[1] == "stopping")
