@@ -306,17 +306,26 @@ def test_a_retry_hides_one_lost_reply_but_counts_it(robot):
         assert backend.describe()["communication_failures"]["read"] == 1
 
 
+def _wait_until(condition, timeout_s: float = 30.0) -> None:
+    """Poll ``condition`` every millisecond until it holds (a failure after ``timeout_s``)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "the condition never held"
+        time.sleep(0.001)
+
+
 def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot):
     """A sync write gets no reply: its failure is the port's. While the line takes no byte,
     ``write_goal`` fails after ``write_timeout_s`` (it would otherwise wait for ever), its
-    goal never arrives, and it is counted; once the line moves again, goals arrive. The
-    line stops 50 ms after the first goal, not at once: pyserial waits for room after every
-    write, even a whole one, so a line stopped right after that goal arrived failed the
-    write that delivered it (once, in a full run)."""
+    goal never arrives, and it is counted; once the line moves again, goals arrive. Each
+    write waits for the emulator's line to be stopped, or to move again: pyserial waits
+    for room after every write, even a whole one, so a line stopped just after a goal
+    arrived failed the write that delivered it (twice in full runs, when the second write
+    was timed by the host's clock instead)."""
     faults = Faults(write=RefusedWrites(at=0.05, seconds=0.4))
     with connected(robot, faults=faults) as (emulator, backend):
         backend.write_goal(np.zeros(2))  # starts the faults' clock
-        time.sleep(0.07)
+        _wait_until(lambda: emulator.line_suspended)
         start = time.perf_counter()
         with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
             backend.write_goal(np.full(2, 0.01))
@@ -324,7 +333,7 @@ def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot)
         with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
             backend.read()  # its instruction cannot go out either
         assert np.all(emulator.plant.goal_position_rad == 0.0)
-        time.sleep(0.4)
+        _wait_until(lambda: not emulator.line_suspended)
         backend.write_goal(np.full(2, 0.01))
         time.sleep(0.02)
         np.testing.assert_allclose(emulator.plant.goal_position_rad, 0.01, atol=2e-5)

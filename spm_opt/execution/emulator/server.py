@@ -149,6 +149,11 @@ class Emulator:
             None if self.faults.write is None else LineStall(self.faults.write, self._slave)
         )
 
+    @property
+    def line_suspended(self) -> bool:
+        """Whether the write fault holds the line's output suspended now."""
+        return self._stall is not None and self._stall.suspended
+
     # ------------------------------------------------------------------ lifecycle
     def __enter__(self) -> Emulator:
         self.start()
