@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_library_cache import wait_until
 
 from spm_opt.base.errors import CommunicationError, DeviceError, InputError
 from spm_opt.execution import dynamixel
@@ -306,14 +307,6 @@ def test_a_retry_hides_one_lost_reply_but_counts_it(robot):
         assert backend.describe()["communication_failures"]["read"] == 1
 
 
-def _wait_until(condition, timeout_s: float = 30.0) -> None:
-    """Poll ``condition`` every millisecond until it holds (a failure after ``timeout_s``)."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "the condition never held"
-        time.sleep(0.001)
-
-
 def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot):
     """A sync write gets no reply: its failure is the port's. While the line takes no byte,
     ``write_goal`` fails after ``write_timeout_s`` (it would otherwise wait for ever), its
@@ -325,7 +318,7 @@ def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot)
     faults = Faults(write=RefusedWrites(at=0.05, seconds=0.4))
     with connected(robot, faults=faults) as (emulator, backend):
         backend.write_goal(np.zeros(2))  # starts the faults' clock
-        _wait_until(lambda: emulator.line_suspended)
+        assert wait_until(lambda: emulator.line_suspended, 30.0)
         start = time.perf_counter()
         with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
             backend.write_goal(np.full(2, 0.01))
@@ -333,7 +326,7 @@ def test_a_stalled_line_fails_write_goal_within_its_timeout_and_counts_it(robot)
         with pytest.raises(CommunicationError, match=r"^port: .*Write timeout"):
             backend.read()  # its instruction cannot go out either
         assert np.all(emulator.plant.goal_position_rad == 0.0)
-        _wait_until(lambda: not emulator.line_suspended)
+        assert wait_until(lambda: not emulator.line_suspended, 30.0)
         backend.write_goal(np.full(2, 0.01))
         time.sleep(0.02)
         np.testing.assert_allclose(emulator.plant.goal_position_rad, 0.01, atol=2e-5)
